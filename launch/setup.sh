@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Creates .venv (if missing) and installs parallax into it; sourced by train.sh and test.sh.
+# Idempotent: re-installs only when pyproject.toml changed since the last install.
+set -euo pipefail
+repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$repo"
+python="${PYTHON:-python3}"
+if [ ! -x .venv/bin/python ]; then
+  echo "[setup] creating .venv with $($python --version 2>&1)"
+  "$python" -m venv .venv
+fi
+# shellcheck disable=SC1091
+. .venv/bin/activate
+stamp=.venv/.parallax-installed
+want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  python -m pip install --quiet --upgrade pip
+  if ! python -c "import torch" 2>/dev/null; then
+    # torch 2.13.0 first and on its own: on these machines it comes from a local CPU wheel;
+    # elsewhere, PARALLAX_TORCH_PIP_ARGS can point pip at a CPU-only index.
+    # shellcheck disable=SC2086
+    python -m pip install --quiet "torch==2.13.0" ${PARALLAX_TORCH_PIP_ARGS:-}
+  fi
+  python -m pip install --quiet -e ".[test,sweeps]"
+  echo "$want" > "$stamp"
+  echo "[setup] installed parallax into .venv"
+fi
+# Headless rendering: respect a backend the user chose, default to EGL.
+export MUJOCO_GL="${MUJOCO_GL:-egl}"
