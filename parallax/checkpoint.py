@@ -1,0 +1,52 @@
+"""Checkpoints that resume exactly: every state dict, counters and RNG states, written atomically.
+
+A checkpoint is written at a presentation boundary, where the world holds no state but its
+random generator (the next reset draws the next stimulus), so restoring it continues the same
+sequence of numbers. Writing goes to a temporary file in the same directory, then `os.replace`,
+so a kill at any moment leaves either the old or the new checkpoint, never half of one.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+CHECKPOINT_NAME = "checkpoint.pt"
+
+
+def save_atomic(state: dict[str, Any], path: str | Path) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            torch.save(state, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    # weights_only=False: the checkpoint holds numpy RNG states and plain Python containers
+    # that we wrote ourselves.
+    return torch.load(Path(path), map_location=map_location, weights_only=False)
+
+
+def global_rng_state() -> dict[str, Any]:
+    """Global generators, saved too in case a library draws from them behind our back."""
+    return {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state()}
+
+
+def set_global_rng_state(state: dict[str, Any]) -> None:
+    random.setstate(state["python"])
+    np.random.set_state(state["numpy"])
+    torch.set_rng_state(state["torch"])

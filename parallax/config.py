@@ -1,0 +1,106 @@
+"""Configuration plumbing for the Hydra apps: composing, naming run directories, validating.
+
+Hydra creates the run directory before the task function runs, so `parallax-train` composes
+and validates the configuration first (``compose`` + ``validate``) and only then hands over to
+Hydra: a bad config fails with one line naming the key and nothing is written.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Sequence
+
+from omegaconf import DictConfig, OmegaConf
+
+#: The Hydra config package; ``conf/`` ships inside the installed package as ``parallax.conf``.
+CONFIG_MODULE = "parallax.conf"
+CONFIG_NAME = "config"
+KNOWN_SCALES = ("coarse", "fine")
+
+
+class ConfigError(ValueError):
+    """A configuration value that cannot work; the message names the key."""
+
+    def __init__(self, key: str, reason: str):
+        super().__init__(f"{key}: {reason}")
+        self.key = key
+
+
+def run_name(override_dirname: str) -> str:
+    """Run-directory name from the command-line overrides ('default' when there are none)."""
+    if not override_dirname:
+        return "default"
+    # '/' would nest directories and '[]' upsets shells; keep names readable and flat.
+    return re.sub(r"[^A-Za-z0-9_.,=+-]", "", override_dirname.replace("/", "-")) or "default"
+
+
+def register_resolvers() -> None:
+    if not OmegaConf.has_resolver("run_name"):
+        OmegaConf.register_new_resolver("run_name", run_name)
+
+
+def compose(overrides: Sequence[str] = ()) -> DictConfig:
+    """The composed configuration for these overrides, as `parallax-train` would see it."""
+    from hydra import compose as hydra_compose, initialize_config_module
+    from hydra.core.global_hydra import GlobalHydra
+
+    register_resolvers()
+    if GlobalHydra.instance().is_initialized():
+        GlobalHydra.instance().clear()
+    with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3"):
+        return hydra_compose(config_name=CONFIG_NAME, overrides=list(overrides))
+
+
+def load_run_config(run_dir: str | Path) -> DictConfig:
+    """The configuration a finished or running run was composed with (`<run>/.hydra/config.yaml`)."""
+    path = Path(run_dir) / ".hydra" / "config.yaml"
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir} is not a parallax run directory (no .hydra/config.yaml)")
+    register_resolvers()
+    return OmegaConf.load(path)
+
+
+def _require(cond: bool, key: str, reason: str) -> None:
+    if not cond:
+        raise ConfigError(key, reason)
+
+
+def validate(cfg: DictConfig) -> None:
+    """Raise ConfigError for the first value that cannot work."""
+    lateral = list(cfg.curriculum.lateral_positions)
+    _require(len(lateral) > 0, "curriculum.lateral_positions", "the lateral list L is empty")
+    _require(all(isinstance(v, (int, float)) for v in lateral), "curriculum.lateral_positions",
+             f"must be numbers in metres, got {lateral}")
+    _require(all(b > a for a, b in zip(lateral, lateral[1:])), "curriculum.lateral_positions",
+             f"must be strictly increasing, got {lateral}")
+    if cfg.curriculum.get("stages"):
+        for i, stage in enumerate(cfg.curriculum.stages):
+            _require(len(stage) > 0 and set(stage) <= set(lateral), f"curriculum.stages[{i}]",
+                     f"must be a non-empty subset of curriculum.lateral_positions, got {list(stage)}")
+        _require(list(cfg.curriculum.stages[-1]) == lateral, "curriculum.stages",
+                 "the last stage must equal curriculum.lateral_positions")
+    _require(int(cfg.env.trial_length) >= 2, "env.trial_length",
+             f"needs at least 2 iterations per trial, got {cfg.env.trial_length}")
+    _require(int(cfg.env.get("robots", 1)) >= 1, "env.robots", f"must be ≥ 1, got {cfg.env.get('robots')}")
+    _require(int(cfg.distance.queue_size) >= 1, "distance.queue_size",
+             f"the queue size c must be ≥ 1, got {cfg.distance.queue_size}")
+    scales = list(cfg.coder.scales)
+    _require(len(scales) > 0, "coder.scales", "needs at least one scale")
+    for s in scales:
+        _require(s in cfg.coder.scale_specs, "coder.scales",
+                 f"unknown scale {s!r}; known: {sorted(cfg.coder.scale_specs)}")
+        window = int(cfg.coder.scale_specs[s].window)
+        _require(window <= int(cfg.env.image_size), f"coder.scale_specs.{s}.window",
+                 f"window {window} px is larger than the image (env.image_size={cfg.env.image_size})")
+    _require(int(cfg.train.presentations) >= 1, "train.presentations",
+             f"must be ≥ 1, got {cfg.train.presentations}")
+    _require(int(cfg.train.checkpoint_every) >= 1, "train.checkpoint_every",
+             f"must be ≥ 1, got {cfg.train.checkpoint_every}")
+    _require(int(cfg.metrics.mae_window) >= 1, "metrics.mae_window", f"must be ≥ 1, got {cfg.metrics.mae_window}")
+    _require(cfg.device in ("cpu", "cuda") or str(cfg.device).startswith("cuda:"), "device",
+             f"must be cpu or cuda, got {cfg.device!r}")
+    start = cfg.perturbation.get("start_fraction")
+    if start is not None:
+        _require(0.0 <= float(start) <= 1.0, "perturbation.start_fraction",
+                 f"must be between 0 and 1, got {start}")

@@ -1,0 +1,165 @@
+"""`parallax-eval <run dir>`: frozen measurements of a trained run (paper §4.2, §6; Tables 2–5).
+
+Learning is switched off (dictionaries, policy and distance learner frozen). The robot is shown
+held-out textures (photographs never used in training) at every distance of the grid — and,
+beyond the paper, at distances between the grid points — and we measure:
+
+- eye-movement MAE per lateral position, |q_p − α*| at the last iteration of each trial, with the
+  greedy policy (argmax) and with the sampled policy;
+- the distance error per range 3–4.9, 5–6.9, 7–10 m and total (Tables 4–5), from s of the
+  greedy policy.
+
+Writes `eval.json` and figures (`eval_mae_per_position.png`, `eval_error_vs_distance.png`,
+`mae_curves.png`) into the run directory (or --out).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from parallax import checkpoint, plots
+from parallax.config import load_run_config
+from parallax.experiment import Experiment
+from parallax.metrics import position_label
+
+
+def grid(start: float, stop: float, step: float) -> list[float]:
+    n = int(round((stop - start) / step)) + 1
+    return [round(start + i * step, 6) for i in range(n)]
+
+
+def run_jobs(exp: Experiment, jobs: list[tuple[float, int]], greedy: bool) -> dict[str, np.ndarray]:
+    """Run one frozen presentation per (distance, texture) job, B robots at a time."""
+    pans, targets, dists = [], [], []
+    B = exp.robots
+    for start in range(0, len(jobs), B):
+        batch = jobs[start:start + B]
+        padded = batch + [batch[-1]] * (B - len(batch))  # idle robots repeat the last job
+        for env, (d, tex) in zip(exp.envs, padded):
+            env.task.set_next_stimulus(texture_index=tex, distance=d)
+        pres = exp.run_presentation(learn=False, greedy=greedy)
+        pans.append(pres.pans[:len(batch)])
+        targets.append(pres.targets[:len(batch)])
+        dists.append(pres.distances[:len(batch)])
+    return {"pans": np.concatenate(pans), "targets": np.concatenate(targets),
+            "distances": np.concatenate(dists)}
+
+
+def distance_results(exp: Experiment, run: dict[str, np.ndarray]) -> dict:
+    from parallax.distance.metrics import distance_error_by_range
+
+    pred = np.asarray(exp.distance.predict(run["pans"]), dtype=np.float64).reshape(-1)
+    true = run["distances"]
+    rel = np.abs(pred - true) / true * 100.0
+    per_distance = {}
+    for d in np.unique(true):
+        per_distance[f"{d:.2f}"] = float(rel[true == d].mean())
+    return {"by_range": distance_error_by_range(pred, true), "per_distance": per_distance}
+
+
+def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | None = None,
+             between: list[float] | None = None, perturbation: str = "auto",
+             out: str | Path | None = None) -> dict:
+    run_dir = Path(run_dir)
+    out_dir = Path(out) if out else run_dir
+    out_dir.mkdir(parents=True, exist_ok=True)
+    cfg = load_run_config(run_dir)
+    ckpt_path = run_dir / checkpoint.CHECKPOINT_NAME
+    if not ckpt_path.is_file():
+        raise FileNotFoundError(f"{run_dir} has no {checkpoint.CHECKPOINT_NAME}: nothing to evaluate")
+    state = checkpoint.load(ckpt_path)
+    exp = Experiment(cfg, stimuli_split="heldout")
+    try:
+        exp.load_state_dict(state["experiment"])
+        exp.set_stage(len(exp.stages) - 1)
+        start = cfg.perturbation.get("start_fraction")
+        was_perturbed = (start is not None and
+                         state["presentation"] >= round(float(start) * int(cfg.train.presentations)))
+        perturbed = {"auto": was_perturbed, "on": True, "off": False}[perturbation]
+        exp.set_perturbation(perturbed)
+        if not exp.distance.is_ready:
+            print("[parallax-eval] the distance learner never trained (queue not full): "
+                  "distance errors are left out", file=sys.stderr)
+        n_tex = exp.envs[0].task.num_textures
+        if textures < 1 or textures > n_tex:
+            raise ValueError(f"--textures must be between 1 and {n_tex} (held-out textures), got {textures}")
+        distances = distances or grid(3.0, 10.0, 0.1)
+        jobs = [(d, (i * textures + k) % n_tex) for i, d in enumerate(distances) for k in range(textures)]
+        labels = [position_label(l) for l in exp.lateral_positions]
+        result: dict = {"run_dir": str(run_dir), "presentations": int(state["presentation"]),
+                        "perturbed": perturbed, "textures_per_distance": textures,
+                        "lateral_positions_cm": labels, "mae_per_position": {}, "mae": {}}
+        runs = {}
+        for mode, greedy in (("greedy", True), ("sampled", False)):
+            runs[mode] = run = run_jobs(exp, jobs, greedy)
+            err = np.abs(run["pans"] - run["targets"])
+            result["mae_per_position"][mode] = {k: float(v) for k, v in zip(labels, err.mean(axis=0))}
+            result["mae"][mode] = float(err.mean())
+        curves = {}
+        if exp.distance.is_ready:
+            result["distance"] = distance_results(exp, runs["greedy"])
+            pd = result["distance"]["per_distance"]
+            curves["grid (held-out textures)"] = ([float(k) for k in pd], list(pd.values()))
+            if between:
+                between_jobs = [(d, i % n_tex) for i, d in enumerate(between)]
+                result["distance_between_grid"] = distance_results(exp, run_jobs(exp, between_jobs, True))
+                pb = result["distance_between_grid"]["per_distance"]
+                curves["between grid points"] = ([float(k) for k in pb], list(pb.values()))
+    finally:
+        exp.close()
+
+    plots.mae_per_position(result["mae_per_position"], out_dir / "eval_mae_per_position.png")
+    if curves:
+        plots.error_vs_distance(curves, out_dir / "eval_error_vs_distance.png")
+    metrics_path = run_dir / "metrics.jsonl"
+    if metrics_path.is_file():
+        records = [json.loads(line) for line in metrics_path.read_text().splitlines() if line.strip()]
+        switch = next((r["steps"] for r in records if r.get("perturbed")), None)
+        if records:
+            plots.mae_curves(records, out_dir / "mae_curves.png", perturbation_at=switch)
+    (out_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
+    return result
+
+
+def format_eval(result: dict) -> str:
+    lines = [f"{'position (cm)':>14} {'greedy MAE':>11} {'sampled MAE':>12}"]
+    for k in result["lateral_positions_cm"]:
+        lines.append(f"{k:>14} {result['mae_per_position']['greedy'][k]:>11.3f} "
+                     f"{result['mae_per_position']['sampled'][k]:>12.3f}")
+    if "distance" in result:
+        lines.append("distance error (%): " + "  ".join(
+            f"{k} m: {v:.2f}" for k, v in result["distance"]["by_range"].items()))
+    if "distance_between_grid" in result:
+        lines.append("between grid points (%): " + "  ".join(
+            f"{k} m: {v:.2f}" for k, v in result["distance_between_grid"]["by_range"].items()))
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="parallax-eval", description=__doc__.split("\n\n")[0])
+    parser.add_argument("run_dir", help="a run directory written by parallax-train")
+    parser.add_argument("--textures", type=int, default=1, help="held-out textures per distance (default 1)")
+    parser.add_argument("--distances", type=float, nargs="+", default=None,
+                        help="distances in metres (default: the grid 3.0, 3.1, …, 10.0)")
+    parser.add_argument("--between", type=float, nargs="*", default=[3.05, 4.47, 5.55, 7.33, 8.81, 9.95],
+                        help="extra distances between grid points (default: a few; none to skip)")
+    parser.add_argument("--perturbation", choices=["auto", "on", "off"], default="auto",
+                        help="auto: as at the end of training")
+    parser.add_argument("--out", default=None, help="where to write eval.json and figures (default: run dir)")
+    args = parser.parse_args(argv)
+    try:
+        result = evaluate(args.run_dir, textures=args.textures, distances=args.distances,
+                          between=args.between, perturbation=args.perturbation, out=args.out)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"parallax-eval: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    print(format_eval(result))
+
+
+if __name__ == "__main__":
+    main()

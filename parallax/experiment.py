@@ -1,0 +1,183 @@
+"""One robot (or B robots in lockstep) living through stimulus presentations — paper §3.2, Fig. 3.
+
+For each presentation: the world draws a texture and a distance and captures I0 at l0; then, for
+each lateral position l_p of L, t_h iterations of
+
+    render → retina → coder (state θ, reward −(eC+eF)) → policy update → action → dictionary update
+
+and the pan reached at the last iteration is q_p. The vector s = [q1 … qr] and the distance go
+to the distance learner. This module builds the four parts from a composed config and runs
+presentations; `parallax.trainer` adds the schedule, metrics, logging and checkpoints, and
+`parallax.evaluate` the frozen measurements.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+import parallax.envs
+from parallax.metrics import position_label
+
+
+@dataclass
+class Presentation:
+    """What B robots did during one stimulus presentation."""
+
+    lateral_positions: list[float]   # the list L used (metres)
+    pans: np.ndarray                 # (B, r) pan at the last iteration of each trial, q_p (deg)
+    targets: np.ndarray              # (B, r) target pan α* at that iteration (deg)
+    distances: np.ndarray            # (B,) metres
+    textures: np.ndarray             # (B,) texture indices
+    steps: int                       # iterations per robot
+    reward: float = float("nan")     # mean coder reward over the presentation
+    errors: dict[str, float] = field(default_factory=dict)   # mean reconstruction error per scale
+    policy_stats: dict[str, float] = field(default_factory=dict)
+    last_view: np.ndarray | None = None  # robot 0's I0 beside its last image (for TensorBoard)
+
+    @property
+    def labels(self) -> list[str]:
+        return [position_label(l) for l in self.lateral_positions]
+
+
+def seeds_for(seed: int, count: int) -> list[int]:
+    """Independent integer seeds for the parts of one run, from one user-facing seed."""
+    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(int(seed)).spawn(count)]
+
+
+class Experiment:
+    """The world(s), coder, policy and distance learner of one run, built from a config."""
+
+    def __init__(self, cfg: DictConfig, stimuli_split: str | None = None):
+        self.cfg = cfg
+        self.device = torch.device(cfg.device)
+        if self.device.type == "cuda" and not torch.cuda.is_available():
+            raise RuntimeError("device=cuda was asked for but torch sees no CUDA device; use device=cpu")
+        self.lateral_positions = [float(l) for l in cfg.curriculum.lateral_positions]
+        stages = cfg.curriculum.get("stages") or [self.lateral_positions]
+        self.stages = [[float(l) for l in stage] for stage in stages]
+
+        env_kwargs = OmegaConf.to_container(cfg.env, resolve=True)
+        self.robots = int(env_kwargs.pop("robots", 1))
+        if stimuli_split is not None:
+            env_kwargs["stimuli"] = {**env_kwargs["stimuli"], "split": stimuli_split}
+        self.trial_length = int(env_kwargs["trial_length"])
+        # One seed per robot's world, then the coder, the policy and the distance learner.
+        seeds = seeds_for(cfg.seed, self.robots + 3)
+        self.envs = [
+            parallax.envs.load(seed=seeds[i], lateral_positions=self.stages[0],
+                               camera_rotation_deg=0.0, blur_sigma=0.0,
+                               rotation_axis=cfg.perturbation.rotation_axis, **env_kwargs)
+            for i in range(self.robots)
+        ]
+        self.coder = instantiate(cfg.coder, image_size=int(cfg.env.image_size),
+                                 seed=seeds[self.robots]).to(self.device)
+        self.policy = instantiate(cfg.policy, state_dim=self.coder.state_dim,
+                                  num_scales=len(cfg.coder.scales),
+                                  seed=seeds[self.robots + 1]).to(self.device)
+        self.distance = instantiate(cfg.distance, lateral_positions=self.lateral_positions,
+                                    seed=seeds[self.robots + 2])
+        if isinstance(self.distance, torch.nn.Module):
+            self.distance.to(self.device)
+        self.stage = 0
+
+    # --- curriculum and perturbation -------------------------------------------------------
+    def set_stage(self, stage: int) -> None:
+        self.stage = int(stage)
+        for env in self.envs:
+            env.task.set_lateral_positions(self.stages[self.stage])
+
+    @property
+    def on_final_list(self) -> bool:
+        return self.stage == len(self.stages) - 1
+
+    def set_perturbation(self, on: bool) -> None:
+        p = self.cfg.perturbation
+        for env in self.envs:
+            env.task.set_perturbation(camera_rotation_deg=float(p.camera_rotation_deg) if on else 0.0,
+                                      blur_sigma=float(p.blur_sigma) if on else 0.0)
+
+    # --- one presentation ------------------------------------------------------------------
+    def _images(self, observations: list[dict], key: str) -> torch.Tensor:
+        return torch.from_numpy(np.stack([o[key] for o in observations])).to(self.device)
+
+    def run_presentation(self, learn: bool = True, greedy: bool = False,
+                         keep_view: bool = False) -> Presentation:
+        """All robots live through one presentation; learning on or frozen."""
+        timesteps = [env.reset() for env in self.envs]
+        obs = [ts.observation for ts in timesteps]
+        lateral = list(self.envs[0].task.lateral_positions)
+        B, r, t_h = self.robots, len(lateral), self.trial_length
+        pans, targets = np.zeros((B, r)), np.zeros((B, r))
+        self.coder.set_reference(self._images(obs, "reference"))
+
+        prev_state = prev_action = None
+        reward_sum, error_sums, n_enc = 0.0, {}, 0
+        stat_sums: dict[str, float] = {}
+        n_updates = steps = 0
+        while True:
+            out = self.coder(self._images(obs, "image"), learn=learn)
+            reward_sum += float(out.reward.mean())
+            for scale, e in out.errors.items():
+                error_sums[scale] = error_sums.get(scale, 0.0) + float(e.mean())
+            n_enc += 1
+            iteration = int(obs[0]["iteration"])
+            # Robots move in lockstep, so they cross a trial boundary together; the transition into
+            # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
+            if learn and prev_state is not None and iteration > 0:
+                valid = torch.ones(B, dtype=torch.bool, device=self.device)
+                stats = self.policy.update(prev_state, prev_action, out.reward, out.state, valid)
+                for k, v in stats.items():
+                    stat_sums[k] = stat_sums.get(k, 0.0) + float(v)
+                n_updates += 1
+            if iteration == t_h - 1:
+                p = int(obs[0]["position_index"])
+                pans[:, p] = [float(o["pan"]) for o in obs]
+                targets[:, p] = [float(o["target_pan"]) for o in obs]
+            if timesteps[0].last():
+                break
+            action = self.policy.act(out.state, greedy=greedy)
+            increments = self.policy.action_values[action].cpu().numpy()
+            timesteps = [env.step(float(a)) for env, a in zip(self.envs, increments)]
+            obs = [ts.observation for ts in timesteps]
+            prev_state, prev_action = out.state, action
+            steps += 1
+
+        view = None
+        if keep_view:
+            view = np.concatenate([obs[0]["reference"], obs[0]["image"]], axis=1)
+        return Presentation(
+            lateral_positions=lateral, pans=pans, targets=targets,
+            distances=np.array([float(o["distance"]) for o in obs]),
+            textures=np.array([int(o["texture_index"]) for o in obs]),
+            steps=steps + 1, reward=reward_sum / n_enc,
+            errors={k: v / n_enc for k, v in error_sums.items()},
+            policy_stats={k: v / n_updates for k, v in stat_sums.items()} if n_updates else {},
+            last_view=view,
+        )
+
+    # --- state -----------------------------------------------------------------------------
+    def state_dict(self) -> dict:
+        return {
+            "coder": self.coder.state_dict(),
+            "policy": self.policy.state_dict(),
+            "distance": self.distance.state_dict(),
+            "env_random": [env.task.random.get_state() for env in self.envs],
+            "stage": self.stage,
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        self.coder.load_state_dict(state["coder"])
+        self.policy.load_state_dict(state["policy"])
+        self.distance.load_state_dict(state["distance"])
+        for env, rs in zip(self.envs, state["env_random"], strict=True):
+            env.task.random.set_state(rs)
+        self.set_stage(state["stage"])
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()

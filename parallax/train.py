@@ -1,0 +1,84 @@
+"""`parallax-train`: the Hydra application that runs the paper's whole loop (Fig. 1).
+
+    parallax-train                                   # default experiment (conf/config.yaml)
+    parallax-train curriculum=multi_5_10 distance.y=2 coder.scales=[coarse]
+    parallax-train -m seed=0,1,2 hydra/launcher=joblib
+
+A bad configuration fails before Hydra creates a run directory: the overrides are composed and
+validated first (`parallax.config.validate`), and only then does Hydra take over.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.errors import HydraException
+from omegaconf import DictConfig
+from omegaconf.errors import OmegaConfBaseException
+
+from parallax.config import CONFIG_MODULE, CONFIG_NAME, ConfigError, compose, register_resolvers, validate
+
+_SWEEP_MARKERS = (",", "range(", "choice(", "glob(", "interval(")
+
+
+def _fail(message: str) -> None:
+    print(f"parallax-train: error: {message}", file=sys.stderr)
+    sys.exit(2)
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def prevalidate(argv: list[str]) -> None:
+    """Compose and validate a single run's overrides; exit with one line on a bad config.
+
+    Sweeps (-m) and Hydra's own flags are left to Hydra; each job of a sweep validates itself.
+    """
+    if any(a.startswith("-") for a in argv):
+        return
+    if any(marker in a.split("=", 1)[-1] for a in argv for marker in _SWEEP_MARKERS
+           if not a.split("=", 1)[-1].startswith("[")):
+        return
+    try:
+        validate(compose(argv))
+    except ConfigError as exc:
+        _fail(str(exc))
+    except (HydraException, OmegaConfBaseException) as exc:
+        _fail(_first_line(exc))
+
+
+@hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name=CONFIG_NAME, version_base="1.3")
+def train(cfg: DictConfig) -> float:
+    """Train one run in Hydra's run directory; returns the final eye-movement MAE (for sweepers)."""
+    from parallax.trainer import Trainer, format_summary
+
+    try:
+        validate(cfg)
+    except ConfigError as exc:
+        _fail(str(exc))
+    run_dir = HydraConfig.get().runtime.output_dir
+    print(f"[parallax] run directory: {run_dir}", flush=True)
+    trainer = Trainer(cfg, run_dir)
+    if trainer.checkpoint_path.exists() and not cfg.resume:
+        _fail(f"resume=false but {trainer.checkpoint_path} exists; resume=true continues that run, "
+              "or choose another directory with hydra.run.dir=...")
+    try:
+        summary = trainer.fit()
+    finally:
+        trainer.exp.close()
+    print(format_summary(summary), flush=True)
+    return float(summary["mae"])
+
+
+def main() -> None:
+    register_resolvers()
+    prevalidate(sys.argv[1:])
+    train()
+
+
+if __name__ == "__main__":
+    main()

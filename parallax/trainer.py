@@ -1,0 +1,250 @@
+"""The trainer: presentations, metrics, TensorBoard, progress, checkpoints and the summary.
+
+Paper §3.2 (the loop, via `parallax.experiment`), §4.2 (eye-movement MAE, eq. 16, Tables 2–3),
+§5 (perturbations switched on mid-run, training continuing) and §6 (distance error per range,
+Tables 4–5). Everything a run writes lives in its run directory:
+
+    .hydra/           the composed config (Hydra)
+    tb/               TensorBoard events
+    metrics.jsonl     one line per presentation (deterministic: no wall-clock values)
+    checkpoint.pt     the latest checkpoint (atomic)
+    summary.json      the final summary (and the one before the perturbation)
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
+
+from parallax import checkpoint
+from parallax.experiment import Experiment, Presentation
+from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, position_label
+
+
+class Trainer:
+    def __init__(self, cfg: DictConfig, run_dir: str | Path):
+        self.cfg = cfg
+        self.run_dir = Path(run_dir)
+        if int(cfg.train.threads) > 0:
+            torch.set_num_threads(int(cfg.train.threads))
+        self.exp = Experiment(cfg)
+        self.eye = EyeMovementTracker(self.exp.lateral_positions, window=int(cfg.metrics.mae_window))
+        self.dist = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
+        self.presentation = 0
+        self.steps = 0
+        self.wall_time = 0.0
+        self.before_perturbation: dict | None = None
+        self.last_distance_stats: dict[str, float] = {}
+        fraction = cfg.perturbation.get("start_fraction")
+        self.perturbation_start = (None if fraction is None
+                                   else int(round(float(fraction) * int(cfg.train.presentations))))
+
+    # --- paths -----------------------------------------------------------------------------
+    @property
+    def checkpoint_path(self) -> Path:
+        return self.run_dir / checkpoint.CHECKPOINT_NAME
+
+    @property
+    def metrics_path(self) -> Path:
+        return self.run_dir / "metrics.jsonl"
+
+    # --- checkpoints -----------------------------------------------------------------------
+    def state_dict(self) -> dict:
+        return {
+            "presentation": self.presentation, "steps": self.steps, "wall_time": self.wall_time,
+            "experiment": self.exp.state_dict(),
+            "eye": self.eye.state_dict(), "dist": self.dist.state_dict(),
+            "before_perturbation": self.before_perturbation,
+            "last_distance_stats": self.last_distance_stats,
+            "global_rng": checkpoint.global_rng_state(),
+        }
+
+    def save(self) -> None:
+        checkpoint.save_atomic(self.state_dict(), self.checkpoint_path)
+
+    def restore(self) -> bool:
+        """Continue from the run directory's checkpoint, if any; drop log lines written after it."""
+        if not self.checkpoint_path.exists():
+            return False
+        state = checkpoint.load(self.checkpoint_path, map_location=self.exp.device)
+        self.exp.load_state_dict(state["experiment"])
+        self.eye.load_state_dict(state["eye"])
+        self.dist.load_state_dict(state["dist"])
+        self.presentation, self.steps = int(state["presentation"]), int(state["steps"])
+        self.wall_time = float(state["wall_time"])
+        self.before_perturbation = state["before_perturbation"]
+        self.last_distance_stats = state["last_distance_stats"]
+        checkpoint.set_global_rng_state(state["global_rng"])
+        if self.metrics_path.exists():
+            kept = [line for line in self.metrics_path.read_text().splitlines()
+                    if line.strip() and json.loads(line)["presentation"] <= self.presentation]
+            self.metrics_path.write_text("".join(line + "\n" for line in kept))
+        return True
+
+    # --- one presentation ------------------------------------------------------------------
+    def _learn_distance(self, pres: Presentation) -> None:
+        """Predict each new s before learning it (the online error), then push it to the queue."""
+        learner = self.exp.distance
+        for s, d in zip(pres.pans, pres.distances):
+            if learner.is_ready:
+                self.dist.record(float(np.asarray(learner.predict(s[None, :])).reshape(-1)[0]), float(d))
+            stats = learner.observe(s, float(d))
+            if stats:
+                self.last_distance_stats = {k: float(v) for k, v in stats.items()}
+
+    def _maybe_advance_stage(self) -> None:
+        if self.exp.on_final_list:
+            return
+        cur = self.cfg.curriculum
+        stage = [position_label(l) for l in self.exp.stages[self.exp.stage]]
+        enough = all(len(self.eye.per_position[k]) >= int(cur.min_trials) for k in stage)
+        mae = self.eye.mae_per_position()
+        if enough and all(mae[k] <= float(cur.advance_below_deg) for k in stage):
+            self.exp.set_stage(self.exp.stage + 1)
+
+    def step_presentation(self, keep_view: bool) -> tuple[Presentation, dict]:
+        pres = self.exp.run_presentation(learn=True, greedy=False, keep_view=keep_view)
+        for b in range(self.exp.robots):
+            for p, label in enumerate(pres.labels):
+                self.eye.record(label, pres.pans[b, p], pres.targets[b, p])
+        if self.exp.on_final_list:
+            self._learn_distance(pres)
+        self.presentation += 1
+        self.steps += pres.steps
+        self._maybe_advance_stage()
+        record = {
+            "presentation": self.presentation, "steps": self.steps, "stage": self.exp.stage,
+            "perturbed": self.perturbed, "reward": pres.reward,
+            **{f"e_{k}": v for k, v in pres.errors.items()},
+            **{f"policy_{k}": v for k, v in pres.policy_stats.items()},
+            "mae": self.eye.mae(), "mae_per_position": self.eye.mae_per_position(),
+            "distance_error": self.dist.by_range(),
+            **{f"lm_{k}": v for k, v in self.last_distance_stats.items()},
+        }
+        return pres, record
+
+    @property
+    def perturbed(self) -> bool:
+        return self.perturbation_start is not None and self.presentation >= self.perturbation_start
+
+    # --- summary ---------------------------------------------------------------------------
+    def metrics_summary(self) -> dict:
+        return {
+            "presentations": self.presentation, "trials": self.eye.trials,
+            "mae": self.eye.mae(), "mae_per_position": self.eye.mae_per_position(),
+            "last_trials": self.eye.last_trials(int(self.cfg.metrics.summary_trials)),
+            "distance_error": self.dist.by_range(),
+        }
+
+    def summary(self) -> dict:
+        return {
+            "curriculum": self.cfg.curriculum.name,
+            "lateral_positions_cm": [position_label(l) for l in self.exp.lateral_positions],
+            "seed": int(self.cfg.seed), "robots": self.exp.robots, "steps": self.steps,
+            **self.metrics_summary(),
+            "before_perturbation": self.before_perturbation,
+            "timing": {"wall_time_s": self.wall_time,
+                       "steps_per_second": self.steps * self.exp.robots / max(self.wall_time, 1e-9)},
+        }
+
+    # --- the run ---------------------------------------------------------------------------
+    def _log_scalars(self, writer: SummaryWriter, record: dict, steps_per_second: float) -> None:
+        step = self.steps
+        writer.add_scalar("coder/reward", record["reward"], step)
+        for k, v in record.items():
+            if k.startswith("e_"):
+                writer.add_scalar(f"coder/error_{k[2:]}", v, step)
+            elif k.startswith("policy_"):
+                writer.add_scalar(f"policy/{k[7:]}", v, step)
+            elif k.startswith("lm_"):
+                writer.add_scalar(f"distance/lm_{k[3:]}", v, step)
+        writer.add_scalar("pursuit/mae", record["mae"], step)
+        for label, v in record["mae_per_position"].items():
+            writer.add_scalar(f"pursuit/mae_{label}cm", v, step)
+        for rng, v in record["distance_error"].items():
+            writer.add_scalar(f"distance/error_pct_{rng}", v, step)
+        writer.add_scalar("perf/steps_per_second", steps_per_second, step)
+        writer.add_scalar("curriculum/stage", record["stage"], step)
+
+    def _log_images(self, writer: SummaryWriter, pres: Presentation) -> None:
+        for scale in self.exp.coder.scales:
+            grid = np.asarray(self.exp.coder.atom_grid(scale))
+            writer.add_image(f"coder/atoms_{scale}", grid, self.steps,
+                             dataformats="HW" if grid.ndim == 2 else "HWC")
+        if pres.last_view is not None:
+            writer.add_image("world/I0_beside_It", pres.last_view, self.steps, dataformats="HWC")
+
+    def fit(self) -> dict:
+        cfg = self.cfg
+        total = int(cfg.train.presentations)
+        resumed = bool(cfg.resume) and self.restore()
+        if self.perturbed:
+            self.exp.set_perturbation(True)
+        writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.steps if resumed else None)
+        if not resumed:
+            writer.add_text("config", "```yaml\n" + OmegaConf.to_yaml(cfg) + "\n```", 0)
+        interactive = sys.stderr.isatty()
+        bar = tqdm(total=total, initial=self.presentation, desc="presentations", unit="pres",
+                   disable=not interactive, dynamic_ncols=True)
+        log_every = max(1, total // 20)
+        try:
+            with self.metrics_path.open("a") as log:
+                while self.presentation < total:
+                    if self.perturbation_start is not None and self.presentation == self.perturbation_start:
+                        self.before_perturbation = self.metrics_summary()
+                        self.exp.set_perturbation(True)
+                    keep_view = (self.presentation + 1) % int(cfg.train.image_every) == 0
+                    t0 = time.perf_counter()
+                    pres, record = self.step_presentation(keep_view)
+                    dt = time.perf_counter() - t0
+                    self.wall_time += dt
+                    sps = pres.steps * self.exp.robots / dt
+                    log.write(json.dumps(record) + "\n")
+                    log.flush()
+                    self._log_scalars(writer, record, sps)
+                    if keep_view:
+                        self._log_images(writer, pres)
+                    dist_total = record["distance_error"].get("total")
+                    if interactive:
+                        bar.set_postfix(steps_s=f"{sps:.0f}", mae=f"{record['mae']:.3f}",
+                                        dist=f"{dist_total:.2f}%" if dist_total is not None else "-")
+                        bar.update(1)
+                    elif self.presentation % log_every == 0 or self.presentation == total:
+                        print(f"[parallax] presentation {self.presentation}/{total}  "
+                              f"steps/s {sps:.0f}  MAE {record['mae']:.3f}°  distance error "
+                              + (f"{dist_total:.2f}%" if dist_total is not None else "-"), flush=True)
+                    if self.presentation % int(cfg.train.checkpoint_every) == 0 or self.presentation == total:
+                        self.save()
+        finally:
+            bar.close()
+            writer.close()
+        summary = self.summary()
+        (self.run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        return summary
+
+
+def format_summary(summary: dict) -> str:
+    """The final table printed at the end of a run."""
+    lines = [f"parallax — {summary['curriculum']}, seed {summary['seed']}, "
+             f"{summary['presentations']} presentations, {summary['steps']} iterations per robot"]
+    lines.append(f"{'position (cm)':>14} {'MAE (window)':>13} {'last-trials mean (var)':>24}")
+    for label, mae in summary["mae_per_position"].items():
+        lt = summary["last_trials"][label]
+        lines.append(f"{label:>14} {mae:>13.3f} {lt['mean']:>15.3f} ({lt['var']:.3f})")
+    lines.append(f"{'all':>14} {summary['mae']:>13.3f}")
+    if summary["distance_error"]:
+        lines.append("distance error (%): " + "  ".join(
+            f"{k} m: {v:.2f}" for k, v in summary["distance_error"].items()))
+    else:
+        lines.append("distance error: not yet (the queue of the distance learner is not full)")
+    t = summary["timing"]
+    lines.append(f"wall time {t['wall_time_s']:.0f} s, {t['steps_per_second']:.0f} steps/s")
+    return "\n".join(lines)
