@@ -1,0 +1,33 @@
+"""Shared test fixtures: the real configs, shrunk so a whole run takes seconds."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+#: Overrides that shrink the default experiment: small images and windows, two lateral
+#: positions, short trials, a tiny queue. Everything else is the shipped configuration.
+TINY = [
+    "env.image_size=64",
+    "env.trial_length=4",
+    "env.stimuli.count=6",
+    "coder.scale_specs.coarse.window=64",
+    "coder.scale_specs.coarse.subsample=4",
+    "coder.scale_specs.fine.window=40",
+    "coder.atoms=32",
+    "curriculum.lateral_positions=[0.05,0.1]",
+    "distance.queue_size=3",
+    "distance.hidden=4",
+    "train.presentations=6",
+    "train.checkpoint_every=2",
+    "train.image_every=3",
+    "metrics.mae_window=20",
+]
+
+
+@pytest.fixture
+def tiny_overrides() -> list[str]:
+    return list(TINY)

@@ -1,0 +1,63 @@
+"""The shipped Hydra configs compose, and bad ones fail early with one line naming the key."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from parallax.config import ConfigError, compose, validate
+from parallax.experiment import seeds_for
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+
+
+def test_default_config_composes_and_validates():
+    cfg = compose()
+    validate(cfg)
+    assert cfg.curriculum.name == "multi_5_20"
+    assert len(cfg.curriculum.lateral_positions) == 16
+    assert cfg.distance.weighting is True
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in (CONF / "curriculum").glob("*.yaml")))
+def test_every_curriculum_composes(name):
+    validate(compose([f"curriculum={name}"]))
+
+
+@pytest.mark.parametrize("override,key", [
+    ("curriculum.lateral_positions=[]", "curriculum.lateral_positions"),
+    ("curriculum.lateral_positions=[0.1,0.05]", "curriculum.lateral_positions"),
+    ("distance.queue_size=0", "distance.queue_size"),
+    ("coder.scales=[medium]", "coder.scales"),
+    ("coder.scale_specs.coarse.window=300", "coder.scale_specs.coarse.window"),
+    ("device=tpu", "device"),
+])
+def test_validate_names_the_key(override, key):
+    with pytest.raises(ConfigError) as info:
+        validate(compose([override]))
+    assert info.value.key == key
+
+
+@pytest.mark.parametrize("override,needle", [
+    ("curriculum.lateral_positions=[]", "curriculum.lateral_positions"),
+    ("coder.scales=[medium]", "coder.scales"),
+    ("no_such_key=1", "no_such_key"),
+])
+def test_cli_bad_config_fails_before_writing(tmp_path, override, needle):
+    run_dir = tmp_path / "run"
+    proc = subprocess.run([sys.executable, "-m", "parallax.train", override, f"hydra.run.dir={run_dir}"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode != 0
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert needle in lines[0]
+    assert not run_dir.exists()
+
+
+def test_seeds_for_is_deterministic_and_distinct():
+    assert seeds_for(0, 5) == seeds_for(0, 5)
+    assert len(set(seeds_for(0, 5))) == 5
+    assert seeds_for(0, 5) != seeds_for(1, 5)

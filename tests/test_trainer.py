@@ -1,0 +1,124 @@
+"""The trainer end to end on a shrunken config: outputs, determinism, resume after SIGKILL, eval."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from parallax.config import compose
+from parallax.trainer import Trainer
+
+
+def _train(tmp: Path, overrides: list[str]) -> dict:
+    cfg = compose(overrides)
+    trainer = Trainer(cfg, tmp)
+    try:
+        return trainer.fit()
+    finally:
+        trainer.exp.close()
+
+
+def _without_timing(summary: dict) -> dict:
+    return {k: v for k, v in summary.items() if k != "timing"}
+
+
+def test_run_writes_everything(tmp_path, tiny_overrides):
+    summary = _train(tmp_path, tiny_overrides)
+    lines = (tmp_path / "metrics.jsonl").read_text().splitlines()
+    assert len(lines) == 6
+    records = [json.loads(line) for line in lines]
+    assert [r["presentation"] for r in records] == list(range(1, 7))
+    # 2 lateral positions × 4 iterations per presentation
+    assert records[-1]["steps"] == 6 * 8
+    assert (tmp_path / "checkpoint.pt").is_file()
+    assert list((tmp_path / "tb").glob("events.out.tfevents.*"))
+    saved = json.loads((tmp_path / "summary.json").read_text())
+    assert saved["presentations"] == 6 and saved["trials"] == 12
+    assert set(saved["mae_per_position"]) == {"5", "10"}
+    # the queue (c = 3) fills after 3 presentations; predictions are made for the next ones
+    assert set(saved["distance_error"]) >= {"total"}
+    assert summary["steps"] == 48
+
+
+def test_same_seed_same_metrics_other_seed_differs(tmp_path, tiny_overrides):
+    a = _train(tmp_path / "a", tiny_overrides + ["seed=3"])
+    b = _train(tmp_path / "b", tiny_overrides + ["seed=3"])
+    c = _train(tmp_path / "c", tiny_overrides + ["seed=4"])
+    assert (tmp_path / "a" / "metrics.jsonl").read_text() == (tmp_path / "b" / "metrics.jsonl").read_text()
+    assert _without_timing(a) == _without_timing(b)
+    assert _without_timing(a) != _without_timing(c)
+
+
+def test_resume_in_process_matches_uninterrupted(tmp_path, tiny_overrides):
+    full = _train(tmp_path / "full", tiny_overrides)
+    _train(tmp_path / "part", tiny_overrides + ["train.presentations=4"])
+    # continuing the same run directory with the full budget
+    resumed = _train(tmp_path / "part", tiny_overrides)
+    assert _without_timing(resumed) == _without_timing(full)
+    assert ((tmp_path / "part" / "metrics.jsonl").read_text()
+            == (tmp_path / "full" / "metrics.jsonl").read_text())
+
+
+def _cli(run_dir: Path, overrides: list[str]) -> list[str]:
+    return [sys.executable, "-m", "parallax.train", *overrides, f"hydra.run.dir={run_dir}"]
+
+
+def test_sigkill_then_resume_gives_the_same_summary(tmp_path, tiny_overrides):
+    overrides = tiny_overrides + ["train.presentations=10", "train.checkpoint_every=1"]
+    ref = tmp_path / "ref"
+    subprocess.run(_cli(ref, overrides), check=True, capture_output=True, timeout=600, cwd=tmp_path)
+    killed = tmp_path / "killed"
+    proc = subprocess.Popen(_cli(killed, overrides), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            cwd=tmp_path)
+    deadline = time.time() + 300
+    # kill once some presentations are done, somewhere in the middle of the run
+    while time.time() < deadline and proc.poll() is None:
+        metrics = killed / "metrics.jsonl"
+        if metrics.exists() and len(metrics.read_text().splitlines()) >= 4:
+            break
+        time.sleep(0.02)
+    assert proc.poll() is None, "the run ended before it could be killed; make it longer"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not (killed / "summary.json").exists()
+    subprocess.run(_cli(killed, overrides), check=True, capture_output=True, timeout=600, cwd=tmp_path)
+    a = json.loads((ref / "summary.json").read_text())
+    b = json.loads((killed / "summary.json").read_text())
+    assert _without_timing(a) == _without_timing(b)
+    assert (ref / "metrics.jsonl").read_text() == (killed / "metrics.jsonl").read_text()
+
+
+def test_perturbation_switches_on_mid_run(tmp_path, tiny_overrides):
+    summary = _train(tmp_path, tiny_overrides + ["perturbation=rotate_blur", "perturbation.start_fraction=0.5"])
+    records = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    assert [r["perturbed"] for r in records] == [False, False, True, True, True, True]
+    assert summary["before_perturbation"]["presentations"] == 3
+
+
+def test_staged_curriculum_widens_the_list(tmp_path, tiny_overrides):
+    overrides = tiny_overrides + [
+        "curriculum=staged", "curriculum.lateral_positions=[0.05,0.1]",
+        "curriculum.stages=[[0.05],[0.05,0.1]]", "curriculum.advance_below_deg=100", "curriculum.min_trials=2"]
+    _train(tmp_path, overrides)
+    records = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    assert records[0]["stage"] == 0 and records[-1]["stage"] == 1
+    assert records[-1]["steps"] < 6 * 8  # the first presentations visited one position only
+
+
+def test_eval_writes_json_and_figures(tmp_path, tiny_overrides):
+    from parallax.evaluate import evaluate
+
+    _train(tmp_path, tiny_overrides)
+    result = evaluate(tmp_path, distances=[3.0, 6.5, 10.0], between=[4.25])
+    assert set(result["mae_per_position"]) == {"greedy", "sampled"}
+    assert (tmp_path / "eval.json").is_file()
+    assert (tmp_path / "eval_mae_per_position.png").is_file()
+    assert (tmp_path / "mae_curves.png").is_file()
+    assert "distance" in result and "total" in result["distance"]["by_range"]
