@@ -1,0 +1,24 @@
+"""The world (paper §3.2, §4.1, §5): a HOAP-3-like humanoid pursuing a textured panel in MuJoCo.
+
+``parallax.envs.load(seed=..., lateral_positions=[...], ...)`` returns a dm_control
+``control.Environment`` whose observations carry the reference image I0, the left-eye image I(t),
+the pan α and the target pan α* (see ``parallax.envs.task``). The robot, the camera and the
+target-pan solver live in ``hoap3``; textures in ``stimuli``; the fast eye renderer in
+``rendering``.
+
+Rendering is headless: a ``MUJOCO_GL`` the user set is respected, otherwise it defaults to egl
+(set here, before dm_control or MuJoCo's GL modules read it).
+"""
+
+from parallax.envs.backend import default_to_egl, import_mujoco
+
+default_to_egl()
+import_mujoco()  # first, so that a broken GL backend gives one clear error
+
+from parallax.envs.hoap3 import PAN_LIMIT_DEG, Physics, eye_fovy_deg  # noqa: E402
+from parallax.envs.stimuli import StimulusSet, load_stimuli  # noqa: E402
+from parallax.envs.task import (ACTION_SET_DEG, LateralPursuitTask, PursuitEnvironment,  # noqa: E402
+                                distance_grid, load)
+
+__all__ = ["load", "Physics", "LateralPursuitTask", "PursuitEnvironment", "StimulusSet",
+           "load_stimuli", "distance_grid", "eye_fovy_deg", "ACTION_SET_DEG", "PAN_LIMIT_DEG"]
