@@ -52,11 +52,14 @@ def compose(overrides: Sequence[str] = ()) -> DictConfig:
         return hydra_compose(config_name=CONFIG_NAME, overrides=list(overrides))
 
 
+RUN_CONFIG_NAME = "config.yaml"
+
+
 def load_run_config(run_dir: str | Path) -> DictConfig:
-    """The configuration a finished or running run was composed with (`<run>/.hydra/config.yaml`)."""
-    path = Path(run_dir) / ".hydra" / "config.yaml"
+    """The configuration a run was composed with (``<run>/config.yaml``, written by the trainer)."""
+    path = Path(run_dir) / RUN_CONFIG_NAME
     if not path.is_file():
-        raise FileNotFoundError(f"{run_dir} is not a parallax run directory (no .hydra/config.yaml)")
+        raise FileNotFoundError(f"{run_dir} is not a parallax run directory (no {RUN_CONFIG_NAME})")
     register_resolvers()
     return OmegaConf.load(path)
 

@@ -4,7 +4,7 @@ Paper §3.2 (the loop, via `parallax.experiment`), §4.2 (eye-movement MAE, eq. 
 §5 (perturbations switched on mid-run, training continuing) and §6 (distance error per range,
 Tables 4–5). Everything a run writes lives in its run directory:
 
-    .hydra/           the composed config (Hydra)
+    config.yaml       the composed config, resolved (Hydra's own record is in .hydra/)
     tb/               TensorBoard events
     metrics.jsonl     one line per presentation (deterministic: no wall-clock values)
     checkpoint.pt     the latest checkpoint (atomic)
@@ -25,6 +25,7 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from parallax import checkpoint
+from parallax.config import RUN_CONFIG_NAME
 from parallax.experiment import Experiment, Presentation
 from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, position_label
 
@@ -186,6 +187,8 @@ class Trainer:
         cfg = self.cfg
         total = int(cfg.train.presentations)
         resumed = bool(cfg.resume) and self.restore()
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        (self.run_dir / RUN_CONFIG_NAME).write_text(OmegaConf.to_yaml(cfg, resolve=True))
         if self.perturbed:
             self.exp.set_perturbation(True)
         writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.steps if resumed else None)
