@@ -1,0 +1,93 @@
+"""Normalisation of the learner's state, the pooled activities θ = [θC; θF] of eq. (5).
+
+Pooled activities (eq. 3) are small and non-negative (about 0.006 per entry) and share a large
+stimulus-dependent common component, so a linear learner fed with them raw sees a feature vector
+of squared norm ≈ 0.02 whose direction is dominated by that common part. Three choices:
+
+* ``none``          — θ as the coder returns it (the paper's form);
+* ``l1_per_scale``  — each scale's block divided by its L1 norm, so every scale sums to 1 and
+  a stimulus's overall activity level (contrast, texture density) no longer moves the logits;
+* ``zscore``        — per entry, minus a running mean, divided by a running standard deviation,
+  and the whole vector divided by √state_dim so that E‖φ‖² ≈ 1: the published step sizes
+  (α_v = 1 in particular) assume features of norm about one, and a plain z-score
+  (E‖φ‖² = state_dim) would make the critic's LMS step diverge.
+
+The running statistics (count, mean, sum of squared deviations, in float64) are buffers, so
+they travel with the state dict; they are updated only when asked (the policy does it for the
+states it acts on while in training mode). With ``horizon`` > 0 the statistics forget: the past
+counts for at most ``horizon`` states, so they follow the pooled activities while the coder's
+dictionaries are still learning (a cumulative mean would lag further behind the longer it ran).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+FEATURE_NORMS = ("none", "l1_per_scale", "zscore")
+
+# Below these a per-scale L1 norm or a per-entry standard deviation counts as zero: such a block
+# or entry carries no information and is mapped to zero rather than amplified rounding noise
+# (a meaningful pooled activity varies by far more than 1e-9).
+_TINY_L1 = 1e-12
+_TINY_STD = 1e-9
+
+
+class FeatureNormalizer(nn.Module):
+    """Maps raw states (B, state_dim) to the features φ the learner is linear in."""
+
+    def __init__(self, state_dim: int, num_scales: int, mode: str = "none",
+                 horizon: int = 0) -> None:
+        super().__init__()
+        if mode not in FEATURE_NORMS:
+            raise ValueError(f"feature_norm must be one of {FEATURE_NORMS}, got {mode!r}")
+        if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 0:
+            raise ValueError(f"zscore_horizon must be a non-negative int, got {horizon!r}")
+        if state_dim % num_scales != 0:
+            raise ValueError(
+                f"state_dim={state_dim} does not split evenly into num_scales={num_scales}")
+        self.state_dim = state_dim
+        self.num_scales = num_scales
+        self.mode = mode
+        self.horizon = horizon
+        self.register_buffer("count", torch.zeros((), dtype=torch.float64))
+        self.register_buffer("mean", torch.zeros(state_dim, dtype=torch.float64))
+        self.register_buffer("sum_sq_dev", torch.zeros(state_dim, dtype=torch.float64))
+
+    def observe(self, states: torch.Tensor) -> None:
+        """Adds a batch of raw states to the running statistics (Chan et al.'s batch merge)."""
+        if self.mode != "zscore":
+            return
+        batch = states.to(self.mean.dtype)
+        batch_count = float(batch.shape[0])
+        if batch_count == 0:
+            return
+        batch_mean = batch.mean(dim=0)
+        batch_sum_sq_dev = ((batch - batch_mean) ** 2).sum(dim=0)
+        if self.horizon and self.count > 0:
+            # Forgetting: shrink the past to at most horizon − batch states' worth of evidence.
+            kept = min(float(self.count), max(self.horizon - batch_count, 0.0))
+            self.sum_sq_dev *= kept / float(self.count)
+            self.count.fill_(kept)
+        total = self.count + batch_count
+        delta = batch_mean - self.mean
+        self.mean += delta * (batch_count / total)
+        self.sum_sq_dev += batch_sum_sq_dev + delta ** 2 * (self.count * batch_count / total)
+        self.count.copy_(total)
+
+    def forward(self, states: torch.Tensor) -> torch.Tensor:
+        if self.mode == "none":
+            return states
+        if self.mode == "l1_per_scale":
+            blocks = states.reshape(states.shape[0], self.num_scales, -1)
+            l1 = blocks.abs().sum(dim=2, keepdim=True)
+            informative = l1 > _TINY_L1
+            normalised = torch.where(informative, blocks / torch.where(informative, l1, 1.0), 0.0)
+            return normalised.reshape(states.shape)
+        variance = self.sum_sq_dev / self.count.clamp(min=1.0)
+        std = variance.sqrt()
+        inverse_std = torch.where(std > _TINY_STD, 1.0 / std.clamp(min=_TINY_STD), 0.0)
+        scale = inverse_std / math.sqrt(self.state_dim)
+        return ((states.to(self.mean.dtype) - self.mean) * scale).to(states.dtype)

@@ -1,0 +1,286 @@
+"""Pursuit policy of §3.4: natural actor-critic with advantage parameters, softmax over pan steps.
+
+Bhatnagar, Sutton, Ghavamzadeh & Lee, "Natural actor-critic algorithms", Automatica 2009,
+algorithm 3, average-reward setting, linear in the state features φ (eq. 5, normalised as chosen
+in :mod:`parallax.policy.features`), with the reward R = −(eC + eF) of eq. (6):
+
+    J ← (1 − ζ)·J + ζ·r                 average reward
+    δ = r − J + ξ·v·φ′ − v·φ            TD error (ξ = 1 textbook; ξ < 1 as in the
+                                        active-efficient-coding code)
+    v ← v + α_v·δ·φ                     critic
+    ψ = ((e_a − π(·|φ)) ⊗ φ) / T        compatible features, = ∇_Θ log π(a|φ)
+    w ← w + α_n·(δ·ψ − ψ·(ψᵀw))         advantage weights (natural gradient estimate)
+    Θ ← Θ·(1 − α_p·λ) + α_p·w           actor, with weight decay λ
+    π(a|φ) = softmax(Θφ / T) over A     eqs. (7)–(8)
+
+For a batch of B robots each row gives its own update from the same current parameters and the
+module applies their mean (J moves by the mean reward); with B = 1 that is exactly the equations.
+Rows marked invalid (the first transition after a stimulus or lateral-position change, which
+would cross a reset) contribute nothing; a batch with no valid row changes nothing.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from collections.abc import Sequence
+from typing import Any
+
+import torch
+from torch import nn
+
+from parallax.policy.features import FeatureNormalizer
+
+#: The paper's pan increments in degrees (§3.4).
+PAPER_ACTIONS_DEG = (-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2)
+
+
+def _check_int(name: str, value: object, minimum: int) -> int:
+    # operator.index accepts ints from NumPy or OmegaConf but refuses floats and strings.
+    try:
+        number = operator.index(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise ValueError(f"{name} must be an int, got {value!r}") from None
+    if isinstance(value, bool) or number < minimum:
+        raise ValueError(f"{name} must be an int ≥ {minimum}, got {value!r}")
+    return number
+
+
+def _check_positive(name: str, value: float) -> float:
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return float(value)
+
+
+def _check_non_negative(name: str, value: float) -> float:
+    if not (math.isfinite(value) and value >= 0):
+        raise ValueError(f"{name} must be a non-negative finite number, got {value!r}")
+    return float(value)
+
+
+def _check_unit_interval(name: str, value: float, allow_zero: bool) -> float:
+    low_ok = value >= 0 if allow_zero else value > 0
+    if not (math.isfinite(value) and low_ok and value <= 1):
+        interval = "[0, 1]" if allow_zero else "(0, 1]"
+        raise ValueError(f"{name} must lie in {interval}, got {value!r}")
+    return float(value)
+
+
+class NaturalActorCritic(nn.Module):
+    """Linear natural actor-critic (Bhatnagar et al. 2009, alg. 3) choosing pan increments.
+
+    ``feature_norm`` picks the state normalisation (:mod:`parallax.policy.features`);
+    ``zscore_horizon`` (states, 0 = never forget) lets its running statistics follow a drifting
+    coder. Learnt state (buffers, all in the state dict): ``critic`` v (D,), ``advantage``
+    w (|A|, D), ``actor`` Θ (|A|, D), ``average_reward`` J, ``updates`` (applied updates), the
+    feature normaliser's running statistics, and — as extra state — the sampling generator.
+    """
+
+    def __init__(
+        self,
+        state_dim: int,
+        num_scales: int = 2,
+        actions: Sequence[float] = PAPER_ACTIONS_DEG,
+        critic_lr: float = 1.0,
+        advantage_lr: float = 0.025,
+        actor_lr: float = 0.002,
+        discount: float = 0.3,
+        reward_rate: float = 0.01,
+        weight_decay: float = 0.01,
+        temperature: float = 1.0,
+        feature_norm: str = "none",
+        seed: int = 0,
+        zscore_horizon: int = 0,
+    ) -> None:
+        super().__init__()
+        state_dim = _check_int("state_dim", state_dim, minimum=1)
+        num_scales = _check_int("num_scales", num_scales, minimum=1)
+        action_list = [float(a) for a in actions]
+        if len(action_list) < 2 or len(set(action_list)) != len(action_list):
+            raise ValueError(f"actions must hold at least two distinct values, got {action_list!r}")
+        if not all(math.isfinite(a) for a in action_list):
+            raise ValueError(f"actions must be finite numbers of degrees, got {action_list!r}")
+        self.state_dim = state_dim
+        self.num_scales = num_scales
+        self.critic_lr = _check_non_negative("critic_lr", critic_lr)
+        self.advantage_lr = _check_non_negative("advantage_lr", advantage_lr)
+        self.actor_lr = _check_non_negative("actor_lr", actor_lr)
+        self.discount = _check_unit_interval("discount", discount, allow_zero=True)
+        self.reward_rate = _check_unit_interval("reward_rate", reward_rate, allow_zero=False)
+        self.weight_decay = _check_non_negative("weight_decay", weight_decay)
+        if self.actor_lr * self.weight_decay >= 1:
+            raise ValueError(
+                f"actor_lr·weight_decay must be below 1, got {self.actor_lr}·{self.weight_decay}")
+        self.temperature = _check_positive("temperature", temperature)
+        seed = _check_int("seed", seed, minimum=0)
+
+        self.normalizer = FeatureNormalizer(state_dim, num_scales, feature_norm,
+                                            _check_int("zscore_horizon", zscore_horizon, 0))
+        num_actions = len(action_list)
+        # float64 so that the pan increments sent to the robot are the configured degrees exactly.
+        self.register_buffer("action_values", torch.tensor(action_list, dtype=torch.float64))
+        self.register_buffer("critic", torch.zeros(state_dim))
+        self.register_buffer("advantage", torch.zeros(num_actions, state_dim))
+        self.register_buffer("actor", torch.zeros(num_actions, state_dim))
+        self.register_buffer("average_reward", torch.zeros(()))
+        self.register_buffer("updates", torch.zeros((), dtype=torch.int64))
+        # Ties in the greedy choice go to the smallest pan step, so an untrained (all-zero) actor
+        # keeps the eye still instead of always turning it the same way.
+        self.register_buffer("_greedy_tie_order", torch.argsort(
+            torch.tensor([abs(a) for a in action_list], dtype=torch.float64), stable=True),
+            persistent=False)
+        # Sampling draws uniforms on the CPU and inverts the CDF on the module's device, so the
+        # same seed gives the same actions on every device.
+        self._generator = torch.Generator(device="cpu")
+        self._generator.manual_seed(seed)
+
+    @property
+    def num_actions(self) -> int:
+        return int(self.action_values.shape[0])
+
+    @property
+    def feature_norm(self) -> str:
+        return self.normalizer.mode
+
+    # ------------------------------------------------------------------ checks
+
+    def _check_states(self, name: str, states: torch.Tensor) -> torch.Tensor:
+        if not isinstance(states, torch.Tensor) or states.ndim != 2 \
+                or states.shape[1] != self.state_dim:
+            shape = tuple(states.shape) if isinstance(states, torch.Tensor) else type(states)
+            raise ValueError(f"{name} must be a (B, {self.state_dim}) tensor, got {shape}")
+        if not states.is_floating_point():
+            raise ValueError(f"{name} must be a floating-point tensor, got {states.dtype}")
+        if not bool(torch.isfinite(states).all()):
+            raise ValueError(f"{name} holds non-finite values")
+        return states.to(device=self.actor.device, dtype=self.actor.dtype)
+
+    def _check_rows(self, name: str, values: torch.Tensor, batch: int) -> torch.Tensor:
+        if not isinstance(values, torch.Tensor) or values.shape != (batch,):
+            shape = tuple(values.shape) if isinstance(values, torch.Tensor) else type(values)
+            raise ValueError(f"{name} must be a ({batch},) tensor, got {shape}")
+        return values.to(self.actor.device)
+
+    # ------------------------------------------------------------------ policy
+
+    def features(self, states: torch.Tensor) -> torch.Tensor:
+        """φ for raw states (B, state_dim), with the normaliser's current statistics."""
+        return self.normalizer(self._check_states("phi", states))
+
+    def _logits(self, features: torch.Tensor) -> torch.Tensor:
+        return features @ self.actor.T / self.temperature
+
+    def probabilities(self, phi: torch.Tensor) -> torch.Tensor:
+        """π(·|φ) (B, |A|), eqs. (7)–(8); changes nothing."""
+        return torch.softmax(self._logits(self.features(phi)), dim=1)
+
+    @torch.no_grad()
+    def act(self, phi: torch.Tensor, greedy: bool = False) -> torch.Tensor:
+        """Action indices (B,) into ``action_values``: sampled from π, or its mode if ``greedy``.
+
+        In training mode the raw states first join the running feature statistics (``zscore``);
+        in eval mode (``.eval()``) acting leaves every buffer as it was.
+        """
+        states = self._check_states("phi", phi)
+        if self.training:
+            self.normalizer.observe(states)
+        logits = self._logits(self.normalizer(states))
+        if greedy:
+            ordered = logits[:, self._greedy_tie_order]
+            return self._greedy_tie_order[ordered.argmax(dim=1)]
+        uniforms = torch.rand(states.shape[0], generator=self._generator, dtype=torch.float64)
+        cumulative = torch.softmax(logits.double(), dim=1).cumsum(dim=1)
+        index = (cumulative < uniforms.to(logits.device).unsqueeze(1)).sum(dim=1)
+        return index.clamp(max=self.num_actions - 1)
+
+    # ------------------------------------------------------------------ learning
+
+    @torch.no_grad()
+    def update(self, phi: torch.Tensor, action: torch.Tensor, reward: torch.Tensor,
+               next_phi: torch.Tensor, valid: torch.Tensor) -> dict[str, float]:
+        """One step of algorithm 3 for the transitions (φ, a, r, φ′) of B robots.
+
+        ``reward`` is the reward observed in φ′ (the coder's −(eC + eF) for the next image);
+        rows with ``valid`` False change nothing. Returns floats for logging: ``td_error`` (mean
+        δ over valid rows, 0 when none), ``average_reward`` (J after the step), ``entropy``
+        (mean entropy of π(·|φ) over all rows), ``value`` (mean v·φ), ``advantage_norm`` ‖w‖,
+        ``actor_norm`` ‖Θ‖ and ``valid_fraction``.
+        """
+        features = self.features(phi)
+        batch = features.shape[0]
+        next_features = self.normalizer(self._check_states("next_phi", next_phi))
+        action = self._check_rows("action", action, batch)
+        if action.dtype != torch.int64:
+            raise ValueError(f"action must be an int64 (LongTensor) of indices, got {action.dtype}")
+        if batch and (int(action.min()) < 0 or int(action.max()) >= self.num_actions):
+            raise ValueError(f"action indices must lie in [0, {self.num_actions}), "
+                             f"got {action.min().item()}..{action.max().item()}")
+        reward = self._check_rows("reward", reward, batch).to(self.actor.dtype)
+        if not bool(torch.isfinite(reward).all()):
+            raise ValueError("reward holds non-finite values")
+        valid = self._check_rows("valid", valid, batch)
+        if valid.dtype != torch.bool:
+            raise ValueError(f"valid must be a BoolTensor, got {valid.dtype}")
+
+        probabilities = torch.softmax(self._logits(features), dim=1)
+        entropy = -(probabilities * torch.log(probabilities.clamp(min=1e-30))).sum(dim=1)
+        td_error = self._apply_update(features[valid], action[valid], reward[valid],
+                                      next_features[valid], probabilities[valid])
+        valid_count = int(valid.sum())
+        summary = torch.stack([
+            td_error.mean() if valid_count else torch.zeros((), device=features.device),
+            self.average_reward,
+            entropy.mean() if batch else torch.zeros((), device=features.device),
+            (features @ self.critic).mean() if batch else torch.zeros((), device=features.device),
+            self.advantage.norm(),
+            self.actor.norm(),
+        ]).tolist()
+        names = ("td_error", "average_reward", "entropy", "value", "advantage_norm", "actor_norm")
+        stats = dict(zip(names, summary))
+        stats["valid_fraction"] = valid_count / batch if batch else 0.0
+        return stats
+
+    def _apply_update(self, features: torch.Tensor, action: torch.Tensor, reward: torch.Tensor,
+                      next_features: torch.Tensor, probabilities: torch.Tensor) -> torch.Tensor:
+        """Applies the mean of the per-row updates of the (valid) rows given; returns their δ."""
+        count = features.shape[0]
+        if count == 0:
+            return features.new_zeros(0)
+        # Each robot's own J update enters its δ, so that the batch applies exactly the mean of
+        # the single-robot updates; the new J is their mean.
+        row_average_reward = ((1 - self.reward_rate) * self.average_reward
+                              + self.reward_rate * reward)
+        td_error = (reward - row_average_reward + self.discount * (next_features @ self.critic)
+                    - features @ self.critic)
+        self.average_reward.copy_(row_average_reward.mean())
+        # Per row ψ = ((e_a − π) ⊗ φ)/T and ψᵀw = (e_a − π)·(wφ)/T: no (B, |A|, D) tensor.
+        score = -probabilities
+        score[torch.arange(count, device=score.device), action] += 1
+        score /= self.temperature
+        advantage_estimate = (score * (features @ self.advantage.T)).sum(dim=1)
+        # mean_i (δ_i − ψ_iᵀw)·ψ_i  =  Σ_i (δ_i − ψ_iᵀw)·score_i ⊗ φ_i / B
+        advantage_step = ((td_error - advantage_estimate).unsqueeze(1) * score).T @ features
+        critic_step = td_error @ features
+        self.critic.add_(critic_step, alpha=self.critic_lr / count)
+        self.advantage.add_(advantage_step, alpha=self.advantage_lr / count)
+        self.actor.mul_(1 - self.actor_lr * self.weight_decay).add_(self.advantage,
+                                                                    alpha=self.actor_lr)
+        self.updates.add_(1)
+        return td_error
+
+    # ------------------------------------------------------------------ resume
+
+    def get_extra_state(self) -> dict[str, Any]:
+        return {"generator": self._generator.get_state()}
+
+    def set_extra_state(self, state: dict[str, Any]) -> None:
+        if not isinstance(state, dict) or "generator" not in state:
+            raise ValueError("policy state dict lacks the sampling generator's state")
+        self._generator.set_state(state["generator"])
+
+    def extra_repr(self) -> str:
+        return (f"state_dim={self.state_dim}, actions={self.action_values.tolist()}, "
+                f"α_v={self.critic_lr}, α_n={self.advantage_lr}, α_p={self.actor_lr}, "
+                f"ξ={self.discount}, ζ={self.reward_rate}, λ={self.weight_decay}, "
+                f"T={self.temperature}, feature_norm={self.feature_norm!r}, "
+                f"zscore_horizon={self.normalizer.horizon}")
