@@ -1,0 +1,166 @@
+"""The egocentric distance learner, paper §3.5–3.5.2, eqs. (9)–(15).
+
+Each new eye-movement vector s (the pan at the end of each lateral position, degrees) is
+queued with its target distance (eq. 9). Once the queue holds c vectors, every new s triggers a
+warm-started Levenberg–Marquardt fit of the network (eqs. 13–15) on the weighted queue
+(eqs. 10–12): ``initial_epochs`` the first time, ``epochs_per_call`` afterwards.
+
+Scaling: before each fit the network's [−1, 1] input/target scaling is refitted to the current
+(weighted) queue; from the second fit on the weights are re-expressed so that the network's
+function is unchanged by the refit, so the warm start really starts where the last fit ended.
+
+μ is carried from one fit to the next (the queue changes by one sample); if a fit ended with
+μ > mu_max the next one starts again from the initial μ. The reported ``loss`` is the mean
+squared error in m² over the queue after the fit (LM itself minimises the sum of squares).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping, Sequence
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from parallax.distance.levenberg_marquardt import LevenbergMarquardt
+from parallax.distance.network import DistanceMLP
+from parallax.distance.queue_memory import QueueMemory
+from parallax.distance.targets import TargetSource, make_target_source
+from parallax.distance.weighting import position_weights, sensitive_positions
+
+DEFAULT_SENSITIVITY = {"patch": 10, "subsample": 8.0, "nearest_distance": 3.0, "tolerance": 2.5}
+DEFAULT_LM = {"mu": 1e-3, "mu_decrease": 0.1, "mu_increase": 10.0, "mu_max": 1e10, "min_grad": 1e-7,
+              "max_params": 5000, "max_jacobian_elements": 20_000_000}
+STATE_VERSION = 1
+
+
+def _merged(name: str, defaults: Mapping[str, float], given: Mapping[str, float] | None) -> dict[str, float]:
+    given = dict(given or {})
+    unknown = sorted(set(given) - set(defaults))
+    if unknown:
+        raise ValueError(f"unknown {name} keys {unknown}; expected some of {sorted(defaults)}")
+    return {**defaults, **given}
+
+
+def _regression_residuals(forward, inputs: Tensor, targets: Tensor) -> Tensor:  # type: ignore[no-untyped-def]
+    return forward(inputs) - targets
+
+
+class DistanceLearner:
+    """Queue memory + weighting + MLP + Levenberg–Marquardt, trained as s vectors arrive."""
+
+    def __init__(self, lateral_positions: Sequence[float], queue_size: int = 300, hidden: int = 30,
+                 weighting: bool = True, y: float = 1.0, sensitivity: Mapping[str, float] | None = None,
+                 epochs_per_call: int = 10, initial_epochs: int = 100, lm: Mapping[str, float] | None = None,
+                 targets: "str | TargetSource" = "ground_truth", seed: int = 0,
+                 input_scaling: str = "global") -> None:
+        self.lateral_positions = [float(value) for value in lateral_positions]
+        if not self.lateral_positions or not all(math.isfinite(v) for v in self.lateral_positions):
+            raise ValueError(f"lateral_positions must be a non-empty list of finite metres, got {lateral_positions!r}")
+        for name, value in (("epochs_per_call", epochs_per_call), ("initial_epochs", initial_epochs)):
+            if int(value) != value or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        self.epochs_per_call, self.initial_epochs = int(epochs_per_call), int(initial_epochs)
+        self.sensitivity = _merged("sensitivity", DEFAULT_SENSITIVITY, sensitivity)
+        self.sensitive = sensitive_positions(self.lateral_positions, **self.sensitivity)
+        flags = self.sensitive if weighting else [False] * len(self.lateral_positions)
+        self.weights = torch.tensor(position_weights(self.lateral_positions, flags, float(y)), dtype=torch.float64)
+
+        self.network = DistanceMLP(len(self.lateral_positions), hidden, input_scaling,
+                                   generator=torch.Generator().manual_seed(int(seed)))
+        self.optimizer = LevenbergMarquardt(self.network, **_merged("lm", DEFAULT_LM, lm))
+        self.queue = QueueMemory(queue_size, len(self.lateral_positions))
+        self.target_source = make_target_source(targets)
+        self.fits = 0
+        self.observations = 0
+
+    @property
+    def is_ready(self) -> bool:
+        """The queue is full and the network has been trained at least once."""
+        return self.queue.is_full and self.fits > 0
+
+    def _as_inputs(self, s: "Tensor | np.ndarray | Sequence[float]") -> Tensor:
+        inputs = torch.as_tensor(np.asarray(s, dtype=np.float64) if not isinstance(s, Tensor) else s)
+        inputs = inputs.detach().to(torch.float64)
+        if inputs.shape[-1:] != self.weights.shape or inputs.dim() > 2:
+            raise ValueError(f"pans must have shape (r,) or (n, r) with r={self.weights.numel()}, got {tuple(inputs.shape)}")
+        if not bool(torch.isfinite(inputs).all()):
+            raise ValueError(f"pans must be finite, got {inputs[~torch.isfinite(inputs)][0].item()!r}")
+        return inputs
+
+    def observe(self, s: "Tensor | np.ndarray | Sequence[float]", distance: float) -> dict[str, float]:
+        """Queue (s, target from ``distance``); fit once the queue is full. Returns floats:
+
+        trained (0/1), loss (MSE in m² over the queue after the fit; NaN before the first fit),
+        rmse_m, epochs (accepted LM steps), mu, grad_norm (‖Jᵀe‖ at the last epoch), stopped_min_grad,
+        stopped_mu_max, stopped_non_finite (0/1) and queue_fill.
+        """
+        inputs = self._as_inputs(s)
+        if inputs.dim() != 1:
+            raise ValueError(f"observe takes one vector s of shape ({self.weights.numel()},), got {tuple(inputs.shape)}")
+        self.queue.push(inputs, self.target_source(inputs, distance))
+        self.observations += 1
+        stats = {"trained": 0.0, "loss": math.nan, "rmse_m": math.nan, "epochs": 0.0, "mu": self.optimizer.mu,
+                 "grad_norm": math.nan, "stopped_min_grad": 0.0, "stopped_mu_max": 0.0,
+                 "stopped_non_finite": 0.0, "queue_fill": float(self.queue.fill)}
+        if not self.queue.is_full:
+            return stats
+        if self.optimizer.mu > self.optimizer.mu_max:
+            self.optimizer.mu = self.optimizer.initial_mu
+        weighted, targets = self.queue.inputs * self.weights, self.queue.targets
+        self.network.fit_scaling(weighted, targets, preserve_function=self.fits > 0)
+        epochs = self.initial_epochs if self.fits == 0 else self.epochs_per_call
+        result = self.optimizer.run(_regression_residuals, weighted, targets, epochs=epochs, per_sample=True)
+        self.fits += 1
+        mse = result.sse / targets.numel()
+        stats.update(trained=1.0, loss=mse, rmse_m=math.sqrt(mse), epochs=float(result.epochs), mu=result.mu,
+                     grad_norm=result.grad_norm, stopped_min_grad=float(result.stop == "min_grad"),
+                     stopped_mu_max=float(result.stop == "mu_max"),
+                     stopped_non_finite=float(result.stop == "non_finite_jacobian"))
+        return stats
+
+    def predict(self, S: "Tensor | np.ndarray | Sequence[Sequence[float]]") -> "Tensor | np.ndarray":
+        """(n, r) pans in degrees → (n,) metres (or (r,) → a scalar), weighted as in training.
+
+        Returns a float64 tensor for a tensor input, a NumPy array otherwise.
+        """
+        if not self.is_ready:
+            raise RuntimeError(f"distance learner is not ready (queue {self.queue.fill}/{self.queue.capacity}, "
+                               f"{self.fits} fits); check is_ready before predict")
+        inputs = self._as_inputs(S)
+        with torch.no_grad():
+            distances = self.network(inputs * self.weights)
+        return distances if isinstance(S, Tensor) else distances.numpy()
+
+    def state_dict(self) -> dict[str, object]:
+        """Everything needed to resume bit-identically (tensors are copies)."""
+        return {
+            "version": STATE_VERSION,
+            "shape": {"inputs": self.weights.numel(), "queue_size": self.queue.capacity,
+                      "hidden": self.network.hidden_layer.out_features},
+            "weights": self.weights.clone(),
+            "network": {k: v.clone() for k, v in self.network.state_dict().items()},
+            "queue": self.queue.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "targets": self.target_source.state_dict(),
+            "fits": self.fits,
+            "observations": self.observations,
+        }
+
+    def load_state_dict(self, state: Mapping[str, object]) -> None:
+        if state.get("version") != STATE_VERSION:
+            raise ValueError(f"distance learner state version {state.get('version')!r}, expected {STATE_VERSION}")
+        shape = {"inputs": self.weights.numel(), "queue_size": self.queue.capacity,
+                 "hidden": self.network.hidden_layer.out_features}
+        if state["shape"] != shape:
+            raise ValueError(f"distance learner state is for {state['shape']!r}, this learner is {shape!r}")
+        if not torch.equal(torch.as_tensor(state["weights"]), self.weights):
+            raise ValueError(f"state was saved with input weights {state['weights']!r}, this learner uses "
+                             f"{self.weights!r} (different L, y or sensitivity)")
+        self.network.load_state_dict(state["network"])  # type: ignore[arg-type]
+        self.queue.load_state_dict(state["queue"])  # type: ignore[arg-type]
+        self.optimizer.load_state_dict(state["optimizer"])  # type: ignore[arg-type]
+        self.target_source.load_state_dict(state["targets"])  # type: ignore[arg-type]
+        self.fits = int(state["fits"])  # type: ignore[arg-type]
+        self.observations = int(state["observations"])  # type: ignore[arg-type]
