@@ -1,0 +1,185 @@
+"""`parallax-bench`: where the time of one environment step goes, and how far it is from the limit.
+
+Prints a readable table and writes JSON of
+- median times per component (the world's render and step, the retina, the encoding of both
+  scales and the dictionary update, the policy's act + update, one Levenberg–Marquardt epoch),
+  from each sub-package's ``benchmark.run``;
+- end-to-end environment steps per second (robot-iterations per second) for B = 1 and B = 16
+  robots in lockstep, on the CPU (and CUDA when present);
+- the roofline of this machine for one step of the coder: its floating-point work and memory
+  traffic divided by the measured matmul throughput and memory bandwidth.
+
+Everything is measured in the same run, so ratios are comparable even on a shared machine;
+medians, never means.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from parallax.config import compose
+
+
+def _median_ms(fn, repeats: int, warmup: int = 3) -> float:
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append((time.perf_counter() - t) * 1e3)
+    return statistics.median(times)
+
+
+# --- the machine's limits ----------------------------------------------------------------------
+def machine_limits(threads: int) -> dict[str, float]:
+    """Measured float32 matmul throughput (GFLOP/s) and copy bandwidth (GB/s) at ``threads``."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        n = 1024
+        a, b = torch.randn(n, n), torch.randn(n, n)
+        out = torch.empty(n, n)
+        ms = _median_ms(lambda: torch.mm(a, b, out=out), repeats=20)
+        gflops = 2 * n ** 3 / (ms * 1e-3) / 1e9
+        src = torch.ones(32 * 2 ** 20)  # 128 MiB: far beyond the caches
+        dst = torch.empty_like(src)
+        ms = _median_ms(lambda: dst.copy_(src), repeats=10)
+        gbps = 2 * src.numel() * 4 / (ms * 1e-3) / 1e9  # one read + one write per element
+    finally:
+        torch.set_num_threads(previous)
+    return {"matmul_gflops": gflops, "copy_gbps": gbps}
+
+
+def coder_work_per_frame(cfg) -> dict[str, float]:
+    """Floating-point operations and bytes moved by the coder for one frame pair (all scales).
+
+    Counted for the Gram-matrix matching pursuit and the dense dictionary gradient as
+    implemented: correlations X·Φᵀ (2PKN), Gram ΦΦᵀ (2N²K), k steps of C ← C − c·G[j] (2kPN),
+    reconstruction B·Φ (2PNK) and the gradient Rᵀ·B (2PKN). Bytes: the patches, dictionary and
+    Gram read once, the correlation matrix read and written at each of the k steps.
+    """
+    from parallax.coding.retina import ScaleSpec
+
+    flops = bytes_moved = 0.0
+    N, k = int(cfg.coder.atoms), int(cfg.coder.sparsity)
+    for scale in cfg.coder.scales:
+        spec = cfg.coder.scale_specs[scale]
+        geometry = ScaleSpec.from_mapping(scale, spec)
+        P, K = geometry.patch_count, geometry.dim
+        flops += 2 * P * K * N + 2 * N * N * K + 2 * k * P * N + 2 * P * N * K + 2 * P * K * N
+        bytes_moved += 4 * (3 * P * K + 3 * N * K + N * N + 2 * (k + 1) * P * N)
+    return {"flops": flops, "bytes": bytes_moved}
+
+
+# --- end to end ----------------------------------------------------------------------------------
+def end_to_end(robots: int, presentations: int, device: str, overrides: list[str]) -> dict[str, float]:
+    """Robot-iterations per second of the whole loop (render → … → dictionary update)."""
+    from parallax.experiment import Experiment
+
+    cfg = compose([f"env.robots={robots}", f"device={device}", *overrides])
+    exp = Experiment(cfg)
+    try:
+        exp.run_presentation()  # warm-up: first calls allocate and compile
+        rates, step_ms = [], []
+        for _ in range(presentations):
+            t = time.perf_counter()
+            pres = exp.run_presentation()
+            dt = time.perf_counter() - t
+            rates.append(pres.steps * robots / dt)
+            step_ms.append(dt / pres.steps * 1e3)
+    finally:
+        exp.close()
+    return {"steps_per_second": statistics.median(rates), "lockstep_ms": statistics.median(step_ms)}
+
+
+def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1, 16),
+        threads: int = 1, components: bool = True) -> dict:
+    torch.set_num_threads(threads)
+    report: dict = {"threads": threads, "torch": torch.__version__,
+                    "cuda": torch.cuda.is_available()}
+    if components:
+        from parallax.coding import benchmark as coding_bench
+        from parallax.distance import benchmark as distance_bench
+        from parallax.envs import benchmark as envs_bench
+        from parallax.policy import benchmark as policy_bench
+
+        report["components_ms"] = {
+            "world": envs_bench.run(repeats),
+            "coder": coding_bench.run(repeats),
+            "policy": policy_bench.run(repeats),
+            "distance": distance_bench.run(max(5, repeats // 3)),
+        }
+        torch.set_num_threads(threads)  # component benchmarks may change it
+    # A short multi-position curriculum: 6 positions × 30 iterations per presentation.
+    overrides = ["curriculum=multi_5_10", f"train.threads={threads}"]
+    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    report["end_to_end"] = {
+        dev: {f"B={b}": end_to_end(b, presentations, dev, overrides) for b in robots} for dev in devices}
+    cfg = compose(overrides)
+    work = coder_work_per_frame(cfg)
+    limits = machine_limits(threads)
+    bound_ms = max(work["flops"] / (limits["matmul_gflops"] * 1e9),
+                   work["bytes"] / (limits["copy_gbps"] * 1e9)) * 1e3
+    report["roofline"] = {**limits, **work, "coder_bound_ms_per_frame": bound_ms}
+    coder_ms = report.get("components_ms", {}).get("coder", {}).get("encode_learn_B1_ms")
+    if coder_ms:
+        report["roofline"]["coder_measured_over_bound"] = coder_ms / bound_ms
+    for dev, by_b in report["end_to_end"].items():
+        for b, r in by_b.items():
+            per_frame = r["lockstep_ms"] / int(b.split("=")[1])
+            r["step_over_coder_bound"] = per_frame / bound_ms
+    return report
+
+
+def format_report(report: dict) -> str:
+    lines = [f"parallax-bench — torch {report['torch']}, {report['threads']} thread(s), "
+             f"CUDA {'yes' if report['cuda'] else 'no'}"]
+    for group, figures in report.get("components_ms", {}).items():
+        lines.append(f"[{group}]")
+        for name, value in figures.items():
+            lines.append(f"  {name:<44} {value:>10.3f}")
+    lines.append("[end to end] robot-iterations per second (median over presentations)")
+    for dev, by_b in report["end_to_end"].items():
+        for b, r in by_b.items():
+            lines.append(f"  {dev} {b:<6} {r['steps_per_second']:>8.1f} steps/s   "
+                         f"lockstep {r['lockstep_ms']:.2f} ms   ×{r['step_over_coder_bound']:.1f} of the coder bound")
+    rf = report["roofline"]
+    lines.append(f"[roofline] matmul {rf['matmul_gflops']:.1f} GFLOP/s, copy {rf['copy_gbps']:.1f} GB/s; "
+                 f"coder per frame {rf['flops'] / 1e6:.1f} MFLOP, {rf['bytes'] / 1e6:.1f} MB "
+                 f"→ bound {rf['coder_bound_ms_per_frame']:.3f} ms")
+    if "coder_measured_over_bound" in rf:
+        lines.append(f"  coder measured / bound: ×{rf['coder_measured_over_bound']:.1f}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="parallax-bench", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--repeats", type=int, default=30, help="timed repeats per component")
+    parser.add_argument("--presentations", type=int, default=3, help="timed presentations per end-to-end case")
+    parser.add_argument("--robots", type=int, nargs="+", default=[1, 16], help="B values end to end")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads")
+    parser.add_argument("--no-components", action="store_true", help="end to end and roofline only")
+    parser.add_argument("--json", default=None, help="also write the report to this file")
+    args = parser.parse_args(argv)
+    if args.repeats < 1 or args.presentations < 1 or min(args.robots) < 1 or args.threads < 1:
+        print("parallax-bench: error: --repeats, --presentations, --robots and --threads must be ≥ 1",
+              file=sys.stderr)
+        sys.exit(2)
+    report = run(args.repeats, args.presentations, tuple(args.robots), args.threads, not args.no_components)
+    print(format_report(report))
+    text = json.dumps(report, indent=2)
+    if args.json:
+        Path(args.json).write_text(text + "\n")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
