@@ -1,0 +1,146 @@
+"""The multi-scale sensory coder the trainer uses (paper §3.3–3.4, eqs. 1–6, Fig. 5).
+
+``MultiScaleCoder`` runs one :class:`~parallax.coding.scale.ScaleCoder` per configured scale
+(coarse and fine in the paper) on the same eye images and returns the reinforcement learner's
+state θ = [θ^C; θ^F] (eq. 5) and reward R = −(e^C + e^F) (eq. 6). Which scales take part is a
+config choice (``coder.scales=[coarse]`` is the single-scale ablation).
+
+Dictionaries are buffers (``coders.<scale>.dictionary``, (N, K), atoms as rows), so
+``state_dict()``/``load_state_dict()`` carry them and ``.to(device)`` moves them; the cached
+reference patches are non-persistent and must be set again after a resume.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+from .atoms import atom_grid
+from .retina import ScaleSpec, as_gray_batch, check_normalisation
+from .scale import ScaleCoder
+
+
+@dataclass
+class CoderOutput:
+    """Per-call result for B images, all float32 on the coder's device."""
+
+    state: torch.Tensor                  # (B, atoms·len(scales)) θ, scales in configured order
+    reward: torch.Tensor                 # (B,) −Σ_j e^j
+    errors: dict[str, torch.Tensor]      # scale → (B,) e^j
+
+
+def scale_seed(seed: int, scale: str) -> int:
+    """The dictionary seed of one scale: depends on (seed, scale name) only, so dropping a scale
+    in an ablation leaves the other scale's initial dictionary unchanged."""
+    sequence = np.random.SeedSequence([seed, zlib.crc32(scale.encode("utf-8"))])
+    return int(sequence.generate_state(1, dtype=np.uint64)[0] >> np.uint64(1))
+
+
+def _image_sides(image_size: Any) -> tuple[int, int]:
+    if isinstance(image_size, (int, np.integer)) and not isinstance(image_size, bool):
+        sides = (int(image_size), int(image_size))
+    elif isinstance(image_size, Sequence) and len(image_size) == 2 and not isinstance(image_size, str):
+        sides = (int(image_size[0]), int(image_size[1]))
+    else:
+        raise ValueError(f"image_size must be an int or (height, width), got {image_size!r}")
+    if min(sides) < 1:
+        raise ValueError(f"image_size must be positive, got {image_size!r}")
+    return sides
+
+
+def _positive_int(name: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return int(value)
+
+
+class MultiScaleCoder(nn.Module):
+    """Sparse coders of several scales on the same images; see the module docstring."""
+
+    def __init__(self, scales: Sequence[str], scale_specs: Mapping[str, Mapping[str, Any]],
+                 atoms: int = 288, sparsity: int = 10, learning_rate: float = 0.2,
+                 normalisation: str = "per_half", learn: bool = True, seed: int = 0,
+                 image_size: int | Sequence[int] = 256, pursuit: str = "gram") -> None:
+        super().__init__()
+        if isinstance(scales, str) or not isinstance(scales, Sequence) or len(scales) == 0:
+            raise ValueError(f"scales must be a non-empty list of scale names, got {scales!r}")
+        scales = [str(name) for name in scales]
+        if len(set(scales)) != len(scales):
+            raise ValueError(f"scales must not repeat a scale, got {scales}")
+        unknown = [name for name in scales if name not in scale_specs]
+        if unknown:
+            raise ValueError(f"scales {unknown} have no entry in scale_specs {sorted(scale_specs)}")
+        atoms = _positive_int("atoms", atoms)
+        sparsity = _positive_int("sparsity", sparsity)
+        learning_rate = float(learning_rate)
+        if not math.isfinite(learning_rate) or learning_rate < 0:
+            raise ValueError(f"learning_rate must be a finite number ≥ 0, got {learning_rate!r}")
+        check_normalisation(normalisation)
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        height, width = _image_sides(image_size)
+
+        coders = {}
+        for name in scales:
+            spec = ScaleSpec.from_mapping(name, scale_specs[name])
+            if spec.window > min(height, width):
+                raise ValueError(f"scale_specs.{name}.window={spec.window} does not fit in "
+                                 f"image_size={image_size!r}")
+            generator = torch.Generator().manual_seed(scale_seed(int(seed), name))
+            coders[name] = ScaleCoder(spec, atoms, sparsity, learning_rate, normalisation,
+                                      generator, pursuit)
+        self.scales = scales
+        self.atoms = atoms
+        self.learn = bool(learn)
+        self.normalisation = normalisation
+        self.coders = nn.ModuleDict(coders)
+
+    @property
+    def state_dim(self) -> int:
+        return self.atoms * len(self.scales)
+
+    @property
+    def dictionaries(self) -> dict[str, torch.Tensor]:
+        """scale → (N, K) dictionary, atoms as rows (first K/2 elements: the I0 half)."""
+        return {name: self.coders[name].dictionary for name in self.scales}
+
+    @property
+    def device(self) -> torch.device:
+        return self.coders[self.scales[0]].dictionary.device
+
+    @torch.no_grad()
+    def set_reference(self, reference: Any) -> None:
+        """Cache the I0 patches of every scale; ``reference`` is (B,H,W,3) RGB or (B,H,W) gray."""
+        gray = as_gray_batch(reference, self.device)
+        for name in self.scales:
+            self.coders[name].set_reference(gray)
+
+    @torch.no_grad()
+    def forward(self, images: Any, learn: bool | None = None) -> CoderOutput:
+        """Encode I(t) against the cached I0; with learning on, then one dictionary step per scale.
+
+        The outputs are those of the encoding before the update.
+        """
+        learn = self.learn if learn is None else bool(learn)
+        gray = as_gray_batch(images, self.device)
+        outputs = {name: self.coders[name](gray, learn) for name in self.scales}
+        errors = {name: output.error for name, output in outputs.items()}
+        state = torch.cat([outputs[name].activity for name in self.scales], dim=1)
+        reward = -torch.stack(list(errors.values())).sum(dim=0)
+        return CoderOutput(state=state, reward=reward, errors=errors)
+
+    def atom_grid(self, scale: str, **options: Any) -> np.ndarray:
+        """uint8 (H, W) picture of ``scale``'s atoms as (I0-half | I(t)-half) pairs; see
+        :func:`parallax.coding.atoms.atom_grid` for the options."""
+        if scale not in self.coders:
+            raise ValueError(f"unknown scale {scale!r}; this coder has {self.scales}")
+        return atom_grid(self.coders[scale].dictionary, self.coders[scale].spec.patch, **options)
+
+    def extra_repr(self) -> str:
+        return f"scales={self.scales}, learn={self.learn}, state_dim={self.state_dim}"

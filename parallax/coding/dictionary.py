@@ -1,0 +1,82 @@
+"""Dictionary learning and the per-scale outputs of the sensory coding model (paper §3.3).
+
+* the dictionary φ^j: N = 288 unit-norm atoms of K = 200, randomly initialised (§3.3), stored
+  as the ROWS of an (N, K) tensor;
+* one gradient step on the reconstruction error after each encoding, then renormalisation of
+  every atom (§3.3, last paragraph): ΔΦ = η·R·Bᵀ/P in the atoms-as-columns notation of the
+  issue, i.e. Φ ← Φ + (η/P)·Bᵀ·R with atoms as rows, R the (P, K) residuals, B the (P, N) codes;
+* pooled activity θ_n = mean_i b_{i,n}² (eqs. 2–3) and reconstruction error
+  e = mean_i ‖γ_i − Φᵀb_i‖² / ‖γ_i‖² (eq. 4), where a zero patch (a flat region, see
+  ``retina``) contributes 0: its 0/0 is defined as 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from .pursuit import SparseCode
+
+#: Atoms are divided by max(‖φ‖, this); a gradient step never comes close to zeroing an atom.
+_MIN_ATOM_NORM = 1e-12
+
+
+def random_dictionary(n_atoms: int, dim: int, generator: torch.Generator,
+                      dtype: torch.dtype = torch.float32) -> torch.Tensor:
+    """(n_atoms, dim) Gaussian atoms normalised to unit length; reproducible from ``generator``."""
+    if n_atoms < 1 or dim < 1:
+        raise ValueError(f"a dictionary needs at least one atom of one element, got {n_atoms}×{dim}")
+    atoms = torch.randn(n_atoms, dim, generator=generator, dtype=torch.float64)
+    return normalise_atoms_(atoms).to(dtype)
+
+
+def normalise_atoms_(dictionary: torch.Tensor) -> torch.Tensor:
+    """Scale every row to unit norm, in place."""
+    norms = torch.linalg.vector_norm(dictionary, dim=1, keepdim=True).clamp_min_(_MIN_ATOM_NORM)
+    return dictionary.div_(norms)
+
+
+def codes_times_residuals(code: SparseCode, n_atoms: int) -> torch.Tensor:
+    """Bᵀ·R, (N, K): for every atom, the coefficient-weighted sum of the residuals of the patches
+    that picked it. Grouping the M·k picks by atom costs M·k·K instead of the dense N·M·K."""
+    picks = code.atom_indices.reshape(-1)
+    order = _stable_order(picks, n_atoms)
+    counts = torch.bincount(picks, minlength=n_atoms)
+    offsets = torch.zeros_like(counts)
+    offsets[1:] = torch.cumsum(counts, 0)[:-1]
+    patch_of_pick = torch.div(order, code.atom_indices.shape[1], rounding_mode="floor")
+    return F.embedding_bag(patch_of_pick, code.residuals, offsets=offsets, mode="sum",
+                           per_sample_weights=code.coefficients.reshape(-1)[order])
+
+
+def _stable_order(picks: torch.Tensor, n_atoms: int) -> torch.Tensor:
+    """Stable argsort of atom indices; on the CPU numpy's radix sort of int16 keys (~7× faster)."""
+    if picks.device.type == "cpu" and n_atoms <= np.iinfo(np.int16).max:
+        keys = picks.numpy().astype(np.int16)
+        return torch.from_numpy(np.argsort(keys, kind="stable"))
+    return torch.argsort(picks, stable=True)
+
+
+@torch.no_grad()
+def gradient_step_(dictionary: torch.Tensor, code: SparseCode, learning_rate: float) -> None:
+    """One step of gradient descent on ½‖γ − Φᵀb‖² averaged over the P coded patches, in place."""
+    patches = code.residuals.shape[0]
+    if patches == 0:
+        return
+    dictionary.add_(codes_times_residuals(code, dictionary.shape[0]), alpha=learning_rate / patches)
+    normalise_atoms_(dictionary)
+
+
+def pooled_activity(codes: torch.Tensor) -> torch.Tensor:
+    """θ (eqs. 2–3): (B, P, N) codes → (B, N) mean squared coefficient of every atom."""
+    return codes.square().mean(dim=1)
+
+
+def reconstruction_error(patches: torch.Tensor, residuals: torch.Tensor) -> torch.Tensor:
+    """e (eq. 4): (B, P, K) patches and residuals → (B,); a zero patch's 0/0 counts as 0."""
+    patch_energy = patches.square().sum(dim=-1)
+    residual_energy = residuals.square().sum(dim=-1)
+    has_energy = patch_energy > 0
+    ratio = residual_energy / torch.where(has_energy, patch_energy, torch.ones_like(patch_energy))
+    return torch.where(has_energy, ratio, torch.zeros_like(ratio)).mean(dim=1)

@@ -1,0 +1,108 @@
+"""One scale of the sensory coding model (paper §3.3, Fig. 5): retina + pursuit + dictionary.
+
+A :class:`ScaleCoder` turns gray eye images into the scale's pooled activity θ^j (eqs. 2–3) and
+reconstruction error e^j (eq. 4), and — when learning — takes one gradient step on its
+dictionary with every patch of every image of the call. The I0 patches are cut once per stimulus
+(:meth:`ScaleCoder.set_reference`) and kept in a non-persistent buffer: they follow
+``.to(device)`` but stay out of ``state_dict()``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from .dictionary import gradient_step_, pooled_activity, random_dictionary, reconstruction_error
+from .pursuit import SparseCode, gram_matrix, matching_pursuit, matching_pursuit_recompute
+from .retina import ScaleSpec, prepare_reference, scale_patches, stack_pair
+
+PURSUITS = ("gram", "recompute")
+
+
+@dataclass
+class ScaleOutput:
+    """What one scale reports for a batch of B images (computed before any dictionary update)."""
+
+    activity: torch.Tensor   # (B, N) θ^j
+    error: torch.Tensor      # (B,) e^j
+
+
+class ScaleCoder(nn.Module):
+    """Sparse coder of one scale. ``dictionary`` is an (N, K) buffer with atoms as rows."""
+
+    dictionary: torch.Tensor
+    reference: torch.Tensor | None
+
+    def __init__(self, spec: ScaleSpec, atoms: int, sparsity: int, learning_rate: float,
+                 normalisation: str, generator: torch.Generator, pursuit: str = "gram") -> None:
+        super().__init__()
+        if pursuit not in PURSUITS:
+            raise ValueError(f"pursuit must be one of {PURSUITS}, got {pursuit!r}")
+        self.spec = spec
+        self.sparsity = sparsity
+        self.learning_rate = learning_rate
+        self.normalisation = normalisation
+        self.pursuit = pursuit
+        self.register_buffer("dictionary", random_dictionary(atoms, spec.dim, generator))
+        self.register_buffer("reference", None, persistent=False)
+        self._gram_key: tuple | None = None
+        self._gram: torch.Tensor | None = None
+
+    @property
+    def atoms(self) -> int:
+        return self.dictionary.shape[0]
+
+    def gram(self) -> torch.Tensor:
+        """Φ·Φᵀ, recomputed only when the dictionary changed (a frozen coder reuses it)."""
+        key = (self.dictionary.data_ptr(), self.dictionary._version, self.dictionary.device,
+               self.dictionary.dtype)
+        if self._gram is None or key != self._gram_key:
+            self._gram = gram_matrix(self.dictionary)
+            self._gram_key = key
+        return self._gram
+
+    @torch.no_grad()
+    def set_reference(self, gray: torch.Tensor) -> None:
+        """Cut and cache the I0 patches of (B,H,W) gray reference images."""
+        raw = scale_patches(gray.to(self.dictionary.device), self.spec)
+        self.reference = prepare_reference(raw, self.normalisation)
+
+    def patch_pairs(self, gray: torch.Tensor) -> torch.Tensor:
+        """γ for every patch: (B,H,W) gray current images → (B, P, K) [I0 half ; I(t) half]."""
+        if self.reference is None:
+            raise RuntimeError("no reference image: call set_reference(I0) before encoding")
+        if gray.shape[0] != self.reference.shape[0]:
+            raise ValueError(f"got {gray.shape[0]} images for {self.reference.shape[0]} references")
+        raw = scale_patches(gray.to(self.dictionary.device), self.spec)
+        return stack_pair(self.reference, raw, self.normalisation)
+
+    def encode(self, patches: torch.Tensor) -> SparseCode:
+        """Matching pursuit (eq. 1) of (M, K) patches on the current dictionary."""
+        if self.pursuit == "gram":
+            return matching_pursuit(patches, self.dictionary, self.sparsity, self.gram())
+        return matching_pursuit_recompute(patches, self.dictionary, self.sparsity)
+
+    @torch.no_grad()
+    def learn_from(self, code: SparseCode) -> None:
+        """One gradient step with all the coded patches, then unit-norm atoms again."""
+        gradient_step_(self.dictionary, code, self.learning_rate)
+
+    @torch.no_grad()
+    def forward(self, gray: torch.Tensor, learn: bool) -> ScaleOutput:
+        pairs = self.patch_pairs(gray)
+        batch, patches, dim = pairs.shape
+        code = self.encode(pairs.reshape(batch * patches, dim))
+        output = ScaleOutput(
+            activity=pooled_activity(code.codes.reshape(batch, patches, -1)),
+            error=reconstruction_error(pairs, code.residuals.reshape(batch, patches, dim)),
+        )
+        if learn:
+            self.learn_from(code)
+        return output
+
+    def extra_repr(self) -> str:
+        return (f"spec={self.spec}, atoms={self.atoms}, sparsity={self.sparsity}, "
+                f"learning_rate={self.learning_rate}, normalisation={self.normalisation!r}, "
+                f"pursuit={self.pursuit!r}")
