@@ -14,14 +14,18 @@ fi
 stamp=.venv/.parallax-installed
 want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-  python -m pip install --quiet --upgrade pip
-  if ! python -c "import torch" 2>/dev/null; then
-    # torch 2.13.0 first and on its own: on these machines it comes from a local CPU wheel;
-    # elsewhere, PARALLAX_TORCH_PIP_ARGS can point pip at a CPU-only index.
-    # shellcheck disable=SC2086
-    python -m pip install --quiet "torch==2.13.0" ${PARALLAX_TORCH_PIP_ARGS:-}
-  fi
-  python -m pip install --quiet -e ".[test,sweeps]"
+  log=.venv/pip-install.log
+  echo "[setup] installing parallax into .venv (log: $log)"
+  {
+    python -m pip install --upgrade pip
+    if ! python -c "import torch"; then
+      # torch 2.13.0 first and on its own: on these machines it comes from a local CPU wheel;
+      # elsewhere, PARALLAX_TORCH_PIP_ARGS can point pip at a CPU-only index.
+      # shellcheck disable=SC2086
+      python -m pip install "torch==2.13.0" ${PARALLAX_TORCH_PIP_ARGS:-}
+    fi
+    python -m pip install -e ".[test,sweeps]"
+  } > "$log" 2>&1 || { tail -n 40 "$log"; echo "[setup] installation failed; see $log" >&2; exit 1; }
   echo "$want" > "$stamp"
   echo "[setup] installed parallax into .venv"
 fi

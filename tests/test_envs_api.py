@@ -49,6 +49,8 @@ def test_environment_is_a_dm_control_environment():
 def test_shipped_config_maps_onto_load():
     cfg = OmegaConf.load(REPO / "conf" / "env" / "hoap3.yaml")
     kwargs = OmegaConf.to_container(cfg, resolve=True)
+    # `robots` is the trainer's (how many environments to make), not an argument of load().
+    assert kwargs.pop("robots") == 1
     assert kwargs["image_size"] == 256 and kwargs["trial_length"] == 30 and kwargs["pan_reset"] is True
     assert parallax.envs.distance_grid(kwargs["distances"]) == parallax.envs.distance_grid(None)
     kwargs.update(image_size=32, trial_length=2)
@@ -60,6 +62,7 @@ def test_shipped_config_maps_onto_load():
     env.close()
     # DictConfig / ListConfig values (not converted) work too.
     cfg.image_size, cfg.trial_length, cfg.stimuli.count = 32, 2, 3
+    del cfg["robots"]
     env = parallax.envs.load(seed=0, lateral_positions=[0.05], **cfg)
     assert env.reset().observation["distance"] >= 3.0
     env.close()

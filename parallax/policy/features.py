@@ -26,7 +26,9 @@ import math
 import torch
 from torch import nn
 
-FEATURE_NORMS = ("none", "l1_per_scale", "zscore")
+FEATURE_NORMS = ("none", "l1_per_scale", "zscore", "centred_unit", "zscore_unit")
+# Modes that keep running statistics of the raw states.
+_RUNNING_MODES = ("zscore", "centred_unit", "zscore_unit")
 
 # Below these a per-scale L1 norm or a per-entry standard deviation counts as zero: such a block
 # or entry carries no information and is mapped to zero rather than amplified rounding noise
@@ -58,7 +60,7 @@ class FeatureNormalizer(nn.Module):
 
     def observe(self, states: torch.Tensor) -> None:
         """Adds a batch of raw states to the running statistics (Chan et al.'s batch merge)."""
-        if self.mode != "zscore":
+        if self.mode not in _RUNNING_MODES:
             return
         batch = states.to(self.mean.dtype)
         batch_count = float(batch.shape[0])
@@ -86,8 +88,25 @@ class FeatureNormalizer(nn.Module):
             informative = l1 > _TINY_L1
             normalised = torch.where(informative, blocks / torch.where(informative, l1, 1.0), 0.0)
             return normalised.reshape(states.shape)
+        centred = states.to(self.mean.dtype) - self.mean
+        if self.mode == "centred_unit":
+            return _unit_rows(centred).to(states.dtype)
         variance = self.sum_sq_dev / self.count.clamp(min=1.0)
         std = variance.sqrt()
         inverse_std = torch.where(std > _TINY_STD, 1.0 / std.clamp(min=_TINY_STD), 0.0)
+        if self.mode == "zscore_unit":
+            return _unit_rows(centred * inverse_std).to(states.dtype)
         scale = inverse_std / math.sqrt(self.state_dim)
-        return ((states.to(self.mean.dtype) - self.mean) * scale).to(states.dtype)
+        return (centred * scale).to(states.dtype)
+
+
+def _unit_rows(features: torch.Tensor) -> torch.Tensor:
+    """Each row scaled to unit L2 norm (an all-zero row stays zero).
+
+    With ‖φ‖ = 1 exactly, the critic's LMS step α_v·δ·φ is stable for any α_v < 2 whatever the
+    pooled activities do — a z-score alone is not bounded: an atom that was rarely active has a
+    tiny running deviation, and when it becomes active its feature explodes (seen on the real
+    task: the critic diverged to NaN after ~6000 updates).
+    """
+    norm = features.norm(dim=1, keepdim=True)
+    return torch.where(norm > _TINY_L1, features / norm.clamp(min=_TINY_L1), 0.0)

@@ -124,6 +124,7 @@ class NaturalActorCritic(nn.Module):
         self.register_buffer("actor", torch.zeros(num_actions, state_dim))
         self.register_buffer("average_reward", torch.zeros(()))
         self.register_buffer("updates", torch.zeros((), dtype=torch.int64))
+        self.register_buffer("rejected_updates", torch.zeros((), dtype=torch.int64))
         # Ties in the greedy choice go to the smallest pan step, so an untrained (all-zero) actor
         # keeps the eye still instead of always turning it the same way.
         self.register_buffer("_greedy_tie_order", torch.argsort(
@@ -238,6 +239,7 @@ class NaturalActorCritic(nn.Module):
         names = ("td_error", "average_reward", "entropy", "value", "advantage_norm", "actor_norm")
         stats = dict(zip(names, summary))
         stats["valid_fraction"] = valid_count / batch if batch else 0.0
+        stats["rejected_updates"] = float(self.rejected_updates)
         return stats
 
     def _apply_update(self, features: torch.Tensor, action: torch.Tensor, reward: torch.Tensor,
@@ -261,6 +263,11 @@ class NaturalActorCritic(nn.Module):
         # mean_i (δ_i − ψ_iᵀw)·ψ_i  =  Σ_i (δ_i − ψ_iᵀw)·score_i ⊗ φ_i / B
         advantage_step = ((td_error - advantage_estimate).unsqueeze(1) * score).T @ features
         critic_step = td_error @ features
+        if not (bool(torch.isfinite(critic_step).all()) and bool(torch.isfinite(advantage_step).all())):
+            # A diverging step would poison v, w and Θ for good (NaN logits → a constant action);
+            # reject it and keep the parameters, as LM rejects a failed step.
+            self.rejected_updates.add_(1)
+            return td_error
         self.critic.add_(critic_step, alpha=self.critic_lr / count)
         self.advantage.add_(advantage_step, alpha=self.advantage_lr / count)
         self.actor.mul_(1 - self.actor_lr * self.weight_decay).add_(self.advantage,
