@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 
 import pytest
+import torch
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -31,3 +32,14 @@ TINY = [
 @pytest.fixture
 def tiny_overrides() -> list[str]:
     return list(TINY)
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """The suite's tensors are small: a second intra-op thread only adds synchronisation, and on
+    a busy shared 2-core machine two OpenMP workers waiting for each other made tests ten times
+    slower. The trainer does the same by default (train.threads=1)."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)

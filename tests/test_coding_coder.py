@@ -20,14 +20,6 @@ SMALL_SPECS = {"coarse": {"window": 64, "subsample": 4, "patch": 10, "stride": 2
                "fine": {"window": 40, "subsample": 2, "patch": 10, "stride": 5}}
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """These problems are too small to gain from intra-op threads, and on a busy shared machine
-    two OpenMP workers waiting for each other make them about ten times slower."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 
 def _coder(**overrides) -> MultiScaleCoder:

@@ -23,14 +23,6 @@ HELD_OUT_PHOTOS = ("rocket", "immunohistochemistry")
 PATCH, MARGIN = 10, 12
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """These problems are too small to gain from intra-op threads, and on a busy shared machine
-    two OpenMP workers waiting for each other make them about ten times slower."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 
 def _gray(name: str, halvings: int) -> np.ndarray:

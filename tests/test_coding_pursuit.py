@@ -13,14 +13,6 @@ from parallax.coding.pursuit import dense_codes, matching_pursuit, matching_purs
 K, N, SPARSITY = 200, 288, 10
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """These problems are too small to gain from intra-op threads, and on a busy shared machine
-    two OpenMP workers waiting for each other make them about ten times slower."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 
 def _unit_rows(rows: int, dim: int, seed: int, dtype: torch.dtype = torch.float64) -> torch.Tensor:

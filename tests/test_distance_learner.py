@@ -21,12 +21,6 @@ CONFIG = Path(__file__).resolve().parents[1] / "conf" / "distance" / "mlp_lm.yam
 SMALL_L = [0.05, 0.10, 0.15, 0.20]
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 def small_learner(**overrides) -> DistanceLearner:

@@ -17,13 +17,6 @@ from parallax.distance.levenberg_marquardt import _DampedSolver
 from parallax.distance.synthetic import PAPER_LATERAL_POSITIONS_M, paper_regression
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Small matrices gain nothing from threads, and a shared 2-core machine loses a lot."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 def regression(forward, inputs, targets):

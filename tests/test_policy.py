@@ -19,14 +19,6 @@ CONFIG = Path(__file__).resolve().parents[1] / "conf" / "policy" / "nac.yaml"
 SMALL_DIM = 12
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    # These tensors are tiny: a second intra-op thread only adds synchronisation, which on a
-    # busy shared machine makes the loops an order of magnitude slower.
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 
 def _policy(**overrides: object) -> NaturalActorCritic:

@@ -10,7 +10,6 @@ import sys
 import time
 from pathlib import Path
 
-import pytest
 
 from parallax.config import compose
 from parallax.trainer import Trainer
