@@ -5,4 +5,4 @@
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
-parallax-train "$@"
+parallax-train experiment=quickstart "$@"

@@ -133,10 +133,10 @@ def format_eval(result: dict) -> str:
                      f"{result['mae_per_position']['sampled'][k]:>12.3f}")
     if "distance" in result:
         lines.append("distance error (%): " + "  ".join(
-            f"{k} m: {v:.2f}" for k, v in result["distance"]["by_range"].items()))
+            f"{k}{'' if k == 'total' else ' m'}: {v:.2f}" for k, v in result["distance"]["by_range"].items()))
     if "distance_between_grid" in result:
         lines.append("between grid points (%): " + "  ".join(
-            f"{k} m: {v:.2f}" for k, v in result["distance_between_grid"]["by_range"].items()))
+            f"{k}{'' if k == 'total' else ' m'}: {v:.2f}" for k, v in result["distance_between_grid"]["by_range"].items()))
     return "\n".join(lines)
 
 

@@ -245,7 +245,7 @@ def format_summary(summary: dict) -> str:
     lines.append(f"{'all':>14} {summary['mae']:>13.3f}")
     if summary["distance_error"]:
         lines.append("distance error (%): " + "  ".join(
-            f"{k} m: {v:.2f}" for k, v in summary["distance_error"].items()))
+            f"{k}{'' if k == 'total' else ' m'}: {v:.2f}" for k, v in summary["distance_error"].items()))
     else:
         lines.append("distance error: not yet (the queue of the distance learner is not full)")
     t = summary["timing"]
