@@ -10,6 +10,7 @@ validated first (`parallax.config.validate`), and only then does Hydra take over
 
 from __future__ import annotations
 
+import logging
 import sys
 
 import hydra
@@ -56,6 +57,9 @@ def train(cfg: DictConfig) -> float:
     """Train one run in Hydra's run directory; returns the final eye-movement MAE (for sweepers)."""
     from parallax.trainer import Trainer, format_summary
 
+    # Hydra logs INFO to the console; the renderer's libraries announce themselves at that level.
+    for noisy in ("absl", "OpenGL"):
+        logging.getLogger(noisy).setLevel(logging.WARNING)
     try:
         validate(cfg)
     except ConfigError as exc:
