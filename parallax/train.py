@@ -55,11 +55,12 @@ def prevalidate(argv: list[str]) -> None:
 @hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name=CONFIG_NAME, version_base="1.3")
 def train(cfg: DictConfig) -> float:
     """Train one run in Hydra's run directory; returns the final eye-movement MAE (for sweepers)."""
-    from parallax.trainer import Trainer, format_summary
-
-    # Hydra logs INFO to the console; the renderer's libraries announce themselves at that level.
+    # Hydra logs INFO to the console; the renderer's libraries announce themselves at that level
+    # when they are imported (below).
     for noisy in ("absl", "OpenGL"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
+    from parallax.trainer import Trainer, format_summary
+
     try:
         validate(cfg)
     except ConfigError as exc:
