@@ -37,7 +37,15 @@ def test_run_writes_everything(tmp_path, tiny_overrides):
     # 2 lateral positions × 4 iterations per presentation
     assert records[-1]["steps"] == 6 * 8
     assert (tmp_path / "checkpoint.pt").is_file()
-    assert list((tmp_path / "tb").glob("events.out.tfevents.*"))
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(tmp_path / "tb"), size_guidance={"scalars": 0, "images": 0}).Reload()
+    scalars = set(events.Tags()["scalars"])
+    assert {"coder/reward", "coder/error_coarse", "coder/error_fine", "pursuit/mae", "pursuit/mae_5cm",
+            "pursuit/mae_10cm", "policy/entropy", "perf/steps_per_second", "distance/error_pct_total",
+            "distance/lm_loss", "distance/lm_mu"} <= scalars, scalars
+    assert {"coder/atoms_coarse", "coder/atoms_fine", "world/I0_beside_It"} <= set(events.Tags()["images"])
+    assert len(events.Scalars("pursuit/mae")) == 6
     saved = json.loads((tmp_path / "summary.json").read_text())
     assert saved["presentations"] == 6 and saved["trials"] == 12
     assert set(saved["mae_per_position"]) == {"5", "10"}
