@@ -72,3 +72,93 @@ def error_vs_distance(curves: dict[str, tuple[Sequence[float], Sequence[float]]]
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+# --- figures of `parallax-report` (several seeds per curve) ---------------------------------------
+
+def mean_sd_curves(curves: dict[str, tuple[Sequence[float], Sequence[float], Sequence[float]]],
+                   path: str | Path, title: str, *, ylabel: str = "MAE (deg)",
+                   xlabel: str = "iterations per robot", perturbation_at: float | None = None,
+                   thin_curves: dict[str, tuple[Sequence[float], Sequence[float]]] | None = None,
+                   log_y: bool = True) -> Path:
+    """Fig. 7–9 over seeds: each curve is a mean (solid) with ±1 sd shaded; `thin_curves` (e.g. one
+    per lateral position) are drawn as thin lines; a gray dashed line marks the perturbation."""
+    path = Path(path)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    thin_curves = thin_curves or {}
+    thin_colours = plt.get_cmap("viridis", max(len(thin_curves), 2))
+    for i, (name, (x, y)) in enumerate(thin_curves.items()):
+        ax.plot(x, y, color=thin_colours(i), lw=0.8, alpha=0.8, label=name)
+    bold_colours = plt.get_cmap("tab10")
+    for i, (name, (x, mean, sd)) in enumerate(curves.items()):
+        x, mean, sd = (np.asarray(v, dtype=float) for v in (x, mean, sd))
+        colour = "k" if len(curves) == 1 else bold_colours(i % 10)
+        ax.plot(x, mean, color=colour, lw=2, label=name)
+        low = mean - sd
+        if log_y:  # a band reaching zero would stretch a log axis to nothing
+            low = np.where(low > 0, low, np.nan)
+        ax.fill_between(x, low, mean + sd, color=colour, alpha=0.2, lw=0)
+    if perturbation_at is not None:
+        ax.axvline(perturbation_at, color="gray", ls="--", label="perturbation")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if log_y:
+        ax.set_yscale("log")
+    ax.set_title(title)
+    ax.legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def error_vs_distance_with_band(lines: dict[str, tuple[Sequence[float], Sequence[float]]], path: str | Path,
+                                title: str = "Distance estimation error", *,
+                                band: tuple[str, Sequence[float], Sequence[float], Sequence[float],
+                                            Sequence[float]] | None = None,
+                                markers: dict[str, tuple[Sequence[float], Sequence[float]]] | None = None) -> Path:
+    """Fig. 10–11: error (%) against distance, one line per model; `band` = (name, d, mean, min,
+    max) draws a group of models (the single-position runs) as its mean with dashed min and max,
+    as the paper does; `markers` adds points (distances between the grid points)."""
+    path = Path(path)
+    fig, ax = plt.subplots(figsize=(7, 3.8))
+    if band is not None:
+        name, d, mean, low, high = band
+        ax.plot(d, mean, color="tab:blue", lw=1.5, label=f"{name}: mean")
+        ax.plot(d, low, color="tab:blue", lw=0.8, ls="--", label=f"{name}: min / max")
+        ax.plot(d, high, color="tab:blue", lw=0.8, ls="--")
+    colours = plt.get_cmap("tab10")
+    for i, (name, (d, err)) in enumerate(lines.items()):
+        ax.plot(d, err, color=colours((i + 1) % 10), lw=1.2, label=name)
+    for i, (name, (d, err)) in enumerate((markers or {}).items()):
+        ax.plot(d, err, ls="none", marker="o", ms=4, color=colours((i + 1) % 10), label=name)
+    ax.set_xlabel("distance (m)")
+    ax.set_ylabel("error (%)")
+    ax.set_title(title)
+    ax.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def ablation_bars(labels: Sequence[str], panels: dict[str, tuple[Sequence[float], Sequence[float]]],
+                  path: str | Path, title: str) -> Path:
+    """One panel per quantity (e.g. final MAE, distance error): a bar per setting, mean with an
+    sd error bar over seeds; a missing value (NaN) leaves its bar out and says so."""
+    path = Path(path)
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels) + 1, 3.6), squeeze=False)
+    x = np.arange(len(labels))
+    for ax, (name, (means, sds)) in zip(axes[0], panels.items()):
+        means = np.asarray(means, dtype=float)
+        sds = np.nan_to_num(np.asarray(sds, dtype=float))
+        ax.bar(x, np.nan_to_num(means), yerr=sds, capsize=3, color="tab:blue", alpha=0.8)
+        for i in np.flatnonzero(~np.isfinite(means)):
+            ax.text(i, 0, "n/a", ha="center", va="bottom", fontsize=7)
+        ax.set_xticks(x, labels, rotation=30, ha="right", fontsize=7)
+        ax.set_title(name, fontsize=9)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

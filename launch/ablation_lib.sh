@@ -1,0 +1,92 @@
+#!/usr/bin/env bash
+# Shared by launch/ablation_*.sh and launch/reproduce.sh, which source it; not a script to run.
+# It sets up .venv (launch/setup.sh) and provides:
+#   px_sweep_dir NAME            the sweep folder of a script: $SWEEP_ROOT/NAME. It is fixed, not
+#                                dated, so running a script again resumes its unfinished runs
+#                                from their checkpoints (finished ones are only re-summarised).
+#   px_sweep SWEEP_DIR ARGS...   parallax-train -m ARGS on the chosen launcher into SWEEP_DIR;
+#                                the caller's "$@" goes last, so it overrides anything before it.
+#   px_eval SWEEP_DIR            parallax-eval every finished run whose eval.json is missing or
+#                                older than its checkpoint (N_JOBS at a time; log in RUN/eval.log).
+#   px_report OUT NAME TITLE TABLES SWEEP_DIR...   parallax-report into OUT/NAME.
+# Environment:
+#   LAUNCHER=joblib        Hydra launcher: joblib (default, this machine), submitit_local, slurm,
+#                          or your git-ignored local_<site> config (see conf/hydra/launcher/slurm.yaml)
+#   SEEDS=0,1,2            the seeds of every setting (a sweep over seed=…)
+#   N_JOBS=2               parallel jobs for joblib and for parallax-eval (default: the 2 cores)
+#   SWEEP_ROOT=outputs/multirun
+#   REPORT_ROOT=docs/results    where the reports go
+#   PARALLAX_EVAL=0        skip parallax-eval (the report then uses the trainer's online errors)
+#   PARALLAX_DRY_RUN=1     print the commands instead of running them (and skip the .venv set-up)
+if [[ "${BASH_SOURCE[0]}" == "$0" ]]; then
+  echo "launch/ablation_lib.sh is sourced by the launch scripts; run one of them instead" >&2
+  exit 2
+fi
+if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
+  # only printing: no need to create or update .venv
+  cd "$(dirname "${BASH_SOURCE[0]}")/.."
+else
+  # shellcheck disable=SC1091
+  source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
+fi
+
+# where the reports go (the scripts write into $report_root and $report_root/ablations)
+report_root="${REPORT_ROOT:-docs/results}"
+
+px_run() {
+  if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
+    printf '%q ' "$@"
+    printf '\n'
+  else
+    "$@"
+  fi
+}
+
+px_sweep_dir() {
+  printf '%s/%s' "${SWEEP_ROOT:-outputs/multirun}" "$1"
+}
+
+px_sweep() {
+  local sweep_dir="$1"
+  shift
+  local launcher="${LAUNCHER:-joblib}"
+  local launcher_args=("hydra/launcher=$launcher")
+  # n_jobs exists only in the joblib launcher's schema; the submitit ones would reject it
+  if [[ "$launcher" == joblib ]]; then
+    launcher_args+=("hydra.launcher.n_jobs=${N_JOBS:-2}")
+  fi
+  px_run parallax-train -m "${launcher_args[@]}" "hydra.sweep.dir=$sweep_dir" "$@"
+}
+
+px_eval() {
+  local sweep_dir="$1"
+  if [[ "${PARALLAX_EVAL:-1}" == 0 ]]; then
+    return 0
+  fi
+  if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
+    echo "parallax-eval RUN  # for each finished run below $sweep_dir without an up-to-date eval.json"
+    return 0
+  fi
+  local todo=() summary run
+  while IFS= read -r -d '' summary; do
+    run="$(dirname "$summary")"
+    if [[ -f "$run/checkpoint.pt" && ( ! -f "$run/eval.json" || "$run/checkpoint.pt" -nt "$run/eval.json" ) ]]; then
+      todo+=("$run")
+    fi
+  done < <(find "$sweep_dir" -name summary.json -not -path '*/.*' -print0 2>/dev/null)
+  if (( ${#todo[@]} == 0 )); then
+    return 0
+  fi
+  echo "[launch] parallax-eval on ${#todo[@]} runs, ${N_JOBS:-2} at a time (logs: RUN/eval.log)"
+  # shellcheck disable=SC2016
+  local one_run='parallax-eval "$1" > "$1/eval.log" 2>&1 ||'
+  # shellcheck disable=SC2016
+  one_run+=' { echo "[launch] parallax-eval failed on $1 (see $1/eval.log)" >&2; exit 1; }'
+  printf '%s\0' "${todo[@]}" | xargs -0 -n 1 -P "${N_JOBS:-2}" sh -c "$one_run" sh
+}
+
+px_report() {
+  local out="$1" name="$2" title="$3" tables="$4"
+  shift 4
+  px_run parallax-report "$@" --out "$out" --name "$name" --title "$title" --tables "$tables"
+}

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Issue 9 ablation — the pan at each new lateral position: reset to 0 (the paper) or kept from
+# the previous position, three seeds each, on the default experiment (5–20 cm with weighting).
+# Extra arguments are Hydra overrides for every job. Report: docs/results/ablations/pan_reset.md.
+# Environment settings: launch/ablation_lib.sh.
+set -euo pipefail
+# shellcheck disable=SC1091
+source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
+sweep="$(px_sweep_dir ablation_pan_reset)"
+status=0
+px_sweep "$sweep" env.pan_reset=true,false "seed=${SEEDS:-0,1,2}" "$@" || status=$?
+px_eval "$sweep" || status=$?
+px_report "$report_root/ablations" pan_reset.md "Ablation: pan reset between lateral positions" \
+  ablation "$sweep"
+exit "$status"

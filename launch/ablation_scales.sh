@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Issue 9 ablation — the sensory coder's scales (paper §3.3): coarse only, fine only, both (the
+# paper's), three seeds each, on the default experiment (5–20 cm with weighting).
+# Extra arguments are Hydra overrides for every job, e.g.
+#     bash launch/ablation_scales.sh train.presentations=800
+# Then parallax-eval on each run and the report docs/results/ablations/scales.md (figures and
+# scales.json beside it). launch/ablation_lib.sh lists the environment settings (LAUNCHER, …).
+set -euo pipefail
+# shellcheck disable=SC1091
+source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
+sweep="$(px_sweep_dir ablation_scales)"
+status=0
+px_sweep "$sweep" coder=coarse,fine,two_scale "seed=${SEEDS:-0,1,2}" "$@" || status=$?
+px_eval "$sweep" || status=$?
+px_report "$report_root/ablations" scales.md "Ablation: coarse and fine scales (paper §3.3)" ablation "$sweep"
+exit "$status"

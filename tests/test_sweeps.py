@@ -1,0 +1,214 @@
+"""Sweeps with Hydra's launchers (issue 9): joblib, submitit_local (with a requeue), the SLURM
+config, the experiment files and the launch scripts.
+
+The sweeps run the real `parallax-train -m` on the shrunken TINY config. Its overrides would make
+a run-directory name longer than a file name may be, so they are left out of the name with
+`override_dirname.exclude_keys` (as `train.threads` & co. are in conf/config.yaml): the job
+directories are then named by the swept settings alone, e.g. `seed=0`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from parallax.config import CONFIG_MODULE, CONFIG_NAME, compose, register_resolvers, validate
+from parallax.trainer import Trainer
+
+REPO = Path(__file__).resolve().parents[1]
+EXPERIMENTS = sorted(p.stem for p in (REPO / "conf" / "experiment").glob("*.yaml"))
+LAUNCH_SCRIPTS = sorted(p.name for p in (REPO / "launch").glob("ablation_*.sh") if p.name != "ablation_lib.sh") \
+    + ["reproduce.sh"]
+
+
+def _name_without(overrides: list[str]) -> str:
+    keys = ["resume", "device", "train.threads", "train.checkpoint_every", "train.image_every"]
+    keys += [o.split("=", 1)[0] for o in overrides]
+    return "hydra.job.config.override_dirname.exclude_keys=[" + ",".join(dict.fromkeys(keys)) + "]"
+
+
+def _sweep(sweep_dir: str, overrides: list[str], launcher: list[str], cwd: Path) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "parallax.train", "-m", *overrides, "seed=0,1", *launcher,
+           f"hydra.sweep.dir={sweep_dir}", _name_without(overrides)]
+    return subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _summaries(sweep_dir: Path) -> dict[str, dict]:
+    return {p.parent.name: json.loads(p.read_text()) for p in sorted(sweep_dir.glob("*/summary.json"))}
+
+
+def _reference_metrics(overrides: list[str], run_dir: Path) -> str:
+    trainer = Trainer(compose(overrides), run_dir)
+    try:
+        trainer.fit()
+    finally:
+        trainer.exp.close()
+    return (run_dir / "metrics.jsonl").read_text()
+
+
+# --- configs -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("experiment", EXPERIMENTS)
+def test_experiment_files_compose_and_validate(experiment):
+    cfg = compose([f"experiment={experiment}"])
+    validate(cfg)
+    if experiment.startswith("paper_"):
+        # the budget is sized on the command line (launch/reproduce.sh passes it through)
+        assert cfg.train.presentations == compose([]).train.presentations
+        assert cfg.perturbation.start_fraction is not None and cfg.perturbation.camera_rotation_deg == 15.0
+        assert cfg.perturbation.blur_sigma == 2.0
+
+
+def test_paper_experiments_cover_tables_2_to_5():
+    from parallax import paper_results as paper
+    from parallax.metrics import position_label
+
+    lists = {}
+    for experiment in (e for e in EXPERIMENTS if e.startswith("paper_")):
+        cfg = compose([f"experiment={experiment}"])
+        lists[experiment] = (tuple(position_label(l) for l in cfg.curriculum.lateral_positions), cfg.distance.weighting)
+    assert {labels for labels, _ in lists.values() if len(labels) == 1} == {(p,) for p in paper.TABLE_POSITIONS_CM}
+    assert set(paper.DISTANCE_ROWS.values()) <= set(lists.values())
+
+
+def _hydra_config(overrides: list[str]):
+    from hydra import compose as hydra_compose, initialize_config_module
+    from hydra.core.global_hydra import GlobalHydra
+
+    register_resolvers()
+    GlobalHydra.instance().clear()
+    with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3"):
+        return hydra_compose(config_name=CONFIG_NAME, overrides=overrides, return_hydra_config=True)
+
+
+def test_slurm_launcher_config_and_a_local_site_file_make_the_sbatch_script(tmp_path, monkeypatch):
+    """hydra/launcher=slurm composes; the real launcher hands its settings to submitit, which
+    accepts them and writes them into the sbatch header (no cluster needed: srun is faked, and
+    the array is captured instead of submitted)."""
+    import submitit
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.utils import instantiate
+
+    site = tmp_path / "site" / "hydra" / "launcher"
+    site.mkdir(parents=True)
+    (site / "local_test.yaml").write_text("defaults:\n  - slurm\n  - _self_\npartition: cpu_test\naccount: proj\n")
+    fake_bin = tmp_path / "bin"
+    fake_bin.mkdir()
+    (fake_bin / "srun").write_text("#!/bin/sh\nexit 1\n")
+    (fake_bin / "srun").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake_bin}{os.pathsep}{os.environ['PATH']}")
+
+    plain = _hydra_config(["hydra/launcher=slurm", f"hydra.sweep.dir={tmp_path / 'sweep'}"])
+    assert plain.hydra.launcher._target_.endswith("SlurmLauncher")
+    assert plain.hydra.launcher.cpus_per_task == 1 and plain.hydra.launcher.partition is None
+
+    cfg = _hydra_config([f"hydra.searchpath=[file://{tmp_path / 'site'}]", "hydra/launcher=local_test",
+                         f"hydra.sweep.dir={tmp_path / 'sweep'}"])
+    HydraConfig.instance().set_config(cfg)
+    launcher = instantiate(cfg.hydra.launcher)
+    launcher.config = cfg
+    captured = {}
+
+    def capture_array(executor, function, *arguments):
+        captured["executor"], captured["jobs"] = executor, len(arguments[0])
+        return []
+
+    monkeypatch.setattr(submitit.AutoExecutor, "map_array", capture_array)
+    launcher.launch([["seed=0"], ["seed=1"]], initial_job_idx=0)
+    slurm = captured["executor"]._executor
+    assert captured["jobs"] == 2 and slurm.max_num_timeout == 5
+    sbatch = slurm._make_submission_file_text("python -m submitit.core._submit x", "uid")
+    for line in ("--partition=cpu_test", "--account=proj", "--cpus-per-task=1", "--mem=4GB", "--time=240",
+                 "--signal=USR2@120"):
+        assert f"#SBATCH {line}" in sbatch
+    assert str(tmp_path / "sweep" / ".submitit") in sbatch
+
+
+# --- sweeps ----------------------------------------------------------------------------------
+
+def test_joblib_sweep_runs_two_jobs(tmp_path, tiny_overrides):
+    sweep_dir = tmp_path / "sweep"
+    proc = _sweep(str(sweep_dir), tiny_overrides, ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"], tmp_path)
+    out, _ = proc.communicate(timeout=600)
+    assert proc.returncode == 0, out[-3000:]
+    summaries = _summaries(sweep_dir)
+    assert sorted(summaries) == ["seed=0", "seed=1"]
+    assert [summaries[k]["seed"] for k in ("seed=0", "seed=1")] == [0, 1]
+    assert all(s["presentations"] == 6 for s in summaries.values())
+    assert summaries["seed=0"]["mae_per_position"] != summaries["seed=1"]["mae_per_position"]
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(entry.name))
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="finds the submitit task through /proc")
+def test_submitit_local_sweep_survives_a_requeue(tmp_path, tiny_overrides):
+    """Two jobs with submitit_local; job seed=0 is preempted (USR2, as SLURM does) half-way.
+    submitit requeues it with the sweep directory already resolved — the `${now:…}` in its name
+    is not evaluated again — and the trainer resumes from the checkpoint: the requeued run's log
+    equals an uninterrupted run's, and the sweep has one dated folder."""
+    overrides = [o for o in tiny_overrides if not o.startswith(("train.presentations", "train.checkpoint_every"))]
+    overrides += ["train.presentations=16", "train.checkpoint_every=1"]
+    root = tmp_path / "multirun"
+    proc = _sweep(str(root) + "/${now:%H-%M-%S-%f}", overrides, ["hydra/launcher=submitit_local"], tmp_path)
+    preempted = None
+    deadline = time.time() + 300
+    while proc.poll() is None and preempted is None and time.time() < deadline:
+        metrics = list(root.glob("*/seed=0/metrics.jsonl"))
+        if metrics and len(metrics[0].read_text().splitlines()) >= 4:
+            for log in root.glob("*/.submitit/*/*_0_log.out"):
+                if "seed=0" in log.read_text() and log.parent.name.isdigit():
+                    tasks = _children(int(log.parent.name))
+                    for task in tasks:
+                        os.kill(task, signal.SIGUSR2)
+                    preempted = log if tasks else None
+        time.sleep(0.02)
+    out, _ = proc.communicate(timeout=600)
+    assert preempted is not None, "job seed=0 ended before it could be preempted; make it longer"
+    assert proc.returncode == 0, out[-3000:]
+    assert "Requeued job" in preempted.read_text()
+
+    sweeps = [p for p in root.iterdir() if p.is_dir()]
+    assert len(sweeps) == 1, sweeps
+    summaries = _summaries(sweeps[0])
+    assert sorted(summaries) == ["seed=0", "seed=1"] and summaries["seed=0"]["presentations"] == 16
+    reference = _reference_metrics(overrides + ["seed=0"], tmp_path / "uninterrupted")
+    assert (sweeps[0] / "seed=0" / "metrics.jsonl").read_text() == reference
+
+
+# --- launch scripts ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("script", LAUNCH_SCRIPTS)
+def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path):
+    path = REPO / "launch" / script
+    subprocess.run(["bash", "-n", str(path)], check=True)
+    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
+    result = subprocess.run(["bash", str(path), "train.presentations=7"], cwd=tmp_path, env=env,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    sweeps = [l for l in lines if l.startswith("parallax-train -m ")]
+    assert sweeps, result.stdout
+    for line in sweeps:
+        assert "hydra/launcher=joblib" in line and "hydra.launcher.n_jobs=2" in line
+        assert "seed=0\\,1\\,2" in line and line.rstrip().endswith("train.presentations=7")
+        assert f"hydra.sweep.dir={tmp_path}/" in line
+    report = [l for l in lines if l.startswith("parallax-report ")]
+    assert len(report) == 1 and "--out docs/results" in report[0]
