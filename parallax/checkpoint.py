@@ -18,6 +18,8 @@ import numpy as np
 import torch
 
 CHECKPOINT_NAME = "checkpoint.pt"
+#: Written once, when the §5 perturbation is switched on: the state learnt before it.
+BEFORE_PERTURBATION_NAME = "checkpoint_before_perturbation.pt"
 
 
 def save_atomic(state: dict[str, Any], path: str | Path) -> None:

@@ -7,6 +7,7 @@ Hydra: a bad config fails with one line naming the key and nothing is written.
 
 from __future__ import annotations
 
+import hashlib
 import re
 from pathlib import Path
 from typing import Sequence
@@ -17,6 +18,8 @@ from omegaconf import DictConfig, OmegaConf
 CONFIG_MODULE = "parallax.conf"
 CONFIG_NAME = "config"
 KNOWN_SCALES = ("coarse", "fine")
+#: File systems refuse names over 255 bytes; longer override lists keep a prefix and a hash.
+MAX_RUN_NAME = 120
 
 
 class ConfigError(ValueError):
@@ -24,7 +27,11 @@ class ConfigError(ValueError):
 
     def __init__(self, key: str, reason: str):
         super().__init__(f"{key}: {reason}")
-        self.key = key
+        self.key, self.reason = key, reason
+
+    def __reduce__(self):
+        # Launchers (joblib, submitit) send a failed job's exception back by pickling it.
+        return (type(self), (self.key, self.reason))
 
 
 def run_name(override_dirname: str) -> str:
@@ -32,7 +39,11 @@ def run_name(override_dirname: str) -> str:
     if not override_dirname:
         return "default"
     # '/' would nest directories and '[]' upsets shells; keep names readable and flat.
-    return re.sub(r"[^A-Za-z0-9_.,=+-]", "", override_dirname.replace("/", "-")) or "default"
+    name = re.sub(r"[^A-Za-z0-9_.,=+-]", "", override_dirname.replace("/", "-")) or "default"
+    if len(name) > MAX_RUN_NAME:
+        digest = hashlib.sha1(override_dirname.encode()).hexdigest()[:10]
+        name = f"{name[:MAX_RUN_NAME - 11]}-{digest}"
+    return name
 
 
 def register_resolvers() -> None:

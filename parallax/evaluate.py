@@ -64,22 +64,24 @@ def distance_results(exp: Experiment, run: dict[str, np.ndarray]) -> dict:
 
 def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | None = None,
              between: list[float] | None = None, perturbation: str = "auto",
-             out: str | Path | None = None) -> dict:
+             out: str | Path | None = None, checkpoint_name: str = checkpoint.CHECKPOINT_NAME) -> dict:
     run_dir = Path(run_dir)
     out_dir = Path(out) if out else run_dir
-    out_dir.mkdir(parents=True, exist_ok=True)
     cfg = load_run_config(run_dir)
-    ckpt_path = run_dir / checkpoint.CHECKPOINT_NAME
+    ckpt_path = run_dir / checkpoint_name
     if not ckpt_path.is_file():
-        raise FileNotFoundError(f"{run_dir} has no {checkpoint.CHECKPOINT_NAME}: nothing to evaluate")
+        raise FileNotFoundError(f"{run_dir} has no {checkpoint_name}: nothing to evaluate")
+    out_dir.mkdir(parents=True, exist_ok=True)
     state = checkpoint.load(ckpt_path)
     exp = Experiment(cfg, stimuli_split="heldout")
     try:
         exp.load_state_dict(state["experiment"])
         exp.set_stage(len(exp.stages) - 1)
         start = cfg.perturbation.get("start_fraction")
+        # Perturbed once a presentation ran after the switch (a checkpoint taken at the switch
+        # holds the learnt state from before it).
         was_perturbed = (start is not None and
-                         state["presentation"] >= round(float(start) * int(cfg.train.presentations)))
+                         state["presentation"] > round(float(start) * int(cfg.train.presentations)))
         perturbed = {"auto": was_perturbed, "on": True, "off": False}[perturbation]
         exp.set_perturbation(perturbed)
         if not exp.distance.is_ready:
@@ -91,7 +93,8 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
         distances = distances or grid(3.0, 10.0, 0.1)
         jobs = [(d, (i * textures + k) % n_tex) for i, d in enumerate(distances) for k in range(textures)]
         labels = [position_label(l) for l in exp.lateral_positions]
-        result: dict = {"run_dir": str(run_dir), "presentations": int(state["presentation"]),
+        result: dict = {"run_dir": str(run_dir), "checkpoint": checkpoint_name,
+                        "presentations": int(state["presentation"]),
                         "perturbed": perturbed, "textures_per_distance": textures,
                         "lateral_positions_cm": labels, "mae_per_position": {}, "mae": {}}
         runs = {}
@@ -119,7 +122,8 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
     metrics_path = run_dir / "metrics.jsonl"
     if metrics_path.is_file():
         records = [json.loads(line) for line in metrics_path.read_text().splitlines() if line.strip()]
-        switch = next((r["steps"] for r in records if r.get("perturbed")), None)
+        first = next((i for i, r in enumerate(records) if r.get("perturbed")), None)
+        switch = None if first is None else (records[first - 1]["steps"] if first else 0)
         if records:
             plots.mae_curves(records, out_dir / "mae_curves.png", perturbation_at=switch)
     (out_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
@@ -151,10 +155,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--perturbation", choices=["auto", "on", "off"], default="auto",
                         help="auto: as at the end of training")
     parser.add_argument("--out", default=None, help="where to write eval.json and figures (default: run dir)")
+    parser.add_argument("--checkpoint", default=checkpoint.CHECKPOINT_NAME,
+                        help=f"checkpoint file in the run dir (default {checkpoint.CHECKPOINT_NAME}; "
+                             f"{checkpoint.BEFORE_PERTURBATION_NAME} for the state before §5's perturbation)")
     args = parser.parse_args(argv)
     try:
         result = evaluate(args.run_dir, textures=args.textures, distances=args.distances,
-                          between=args.between, perturbation=args.perturbation, out=args.out)
+                          between=args.between, perturbation=args.perturbation, out=args.out,
+                          checkpoint_name=args.checkpoint)
     except (FileNotFoundError, ValueError) as exc:
         print(f"parallax-eval: error: {exc}", file=sys.stderr)
         sys.exit(2)

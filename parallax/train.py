@@ -16,6 +16,7 @@ import sys
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException
+from hydra.types import RunMode
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
@@ -61,14 +62,22 @@ def train(cfg: DictConfig) -> float:
         logging.getLogger(noisy).setLevel(logging.WARNING)
     from parallax.trainer import Trainer, format_summary
 
+    # In a sweep a bad job must fail alone: exiting would take the launcher's worker (and with
+    # joblib every other job) down with it, so raise and let Hydra record the failure.
+    in_sweep = HydraConfig.get().mode == RunMode.MULTIRUN
     try:
         validate(cfg)
     except ConfigError as exc:
+        if in_sweep:
+            raise
         _fail(str(exc))
     run_dir = HydraConfig.get().runtime.output_dir
     print(f"[parallax] run directory: {run_dir}", flush=True)
     trainer = Trainer(cfg, run_dir)
     if trainer.checkpoint_path.exists() and not cfg.resume:
+        trainer.exp.close()
+        if in_sweep:
+            raise ConfigError("resume", f"false but {trainer.checkpoint_path} exists")
         _fail(f"resume=false but {trainer.checkpoint_path} exists; resume=true continues that run, "
               "or choose another directory with hydra.run.dir=...")
     try:

@@ -86,7 +86,7 @@ class Trainer:
         checkpoint.set_global_rng_state(state["global_rng"])
         if self.metrics_path.exists():
             kept = [line for line in self.metrics_path.read_text().splitlines()
-                    if line.strip() and json.loads(line)["presentation"] <= self.presentation]
+                    if _presentation_of(line) <= self.presentation]
             self.metrics_path.write_text("".join(line + "\n" for line in kept))
         return True
 
@@ -118,12 +118,13 @@ class Trainer:
                 self.eye.record(label, pres.pans[b, p], pres.targets[b, p])
         if self.exp.on_final_list:
             self._learn_distance(pres)
+        ran_perturbed = self.perturbed  # before the count moves on: how this presentation ran
         self.presentation += 1
         self.steps += pres.steps
         self._maybe_advance_stage()
         record = {
             "presentation": self.presentation, "steps": self.steps, "stage": self.exp.stage,
-            "perturbed": self.perturbed, "reward": pres.reward,
+            "perturbed": ran_perturbed, "reward": pres.reward,
             **{f"e_{k}": v for k, v in pres.errors.items()},
             **{f"policy_{k}": v for k, v in pres.policy_stats.items()},
             "mae": self.eye.mae(), "mae_per_position": self.eye.mae_per_position(),
@@ -203,6 +204,8 @@ class Trainer:
                 while self.presentation < total:
                     if self.perturbation_start is not None and self.presentation == self.perturbation_start:
                         self.before_perturbation = self.metrics_summary()
+                        # The learnt state just before §5's perturbation, for parallax-eval --checkpoint.
+                        checkpoint.save_atomic(self.state_dict(), self.run_dir / checkpoint.BEFORE_PERTURBATION_NAME)
                         self.exp.set_perturbation(True)
                     keep_view = (self.presentation + 1) % int(cfg.train.image_every) == 0
                     t0 = time.perf_counter()
@@ -232,6 +235,15 @@ class Trainer:
         summary = self.summary()
         (self.run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         return summary
+
+
+def _presentation_of(line: str) -> float:
+    """The presentation a metrics.jsonl line belongs to; a line torn by a hard kill counts as
+    after any checkpoint, so resuming drops it."""
+    try:
+        return json.loads(line)["presentation"]
+    except (json.JSONDecodeError, KeyError, TypeError):
+        return float("inf")
 
 
 def format_summary(summary: dict) -> str:

@@ -57,6 +57,17 @@ def test_cli_bad_config_fails_before_writing(tmp_path, override, needle):
     assert not run_dir.exists()
 
 
+def test_run_names_are_flat_and_short():
+    from parallax.config import MAX_RUN_NAME, run_name
+
+    assert run_name("") == "default"
+    assert run_name("curriculum=multi_5_10,distance.y=2") == "curriculum=multi_5_10,distance.y=2"
+    long_a = ",".join(f"key{i}=value{i}" for i in range(60))
+    long_b = long_a + ",extra=1"
+    assert len(run_name(long_a)) <= MAX_RUN_NAME and run_name(long_a) != run_name(long_b)
+    assert "/" not in run_name("hydra/launcher=joblib")
+
+
 def test_seeds_for_is_deterministic_and_distinct():
     assert seeds_for(0, 5) == seeds_for(0, 5)
     assert len(set(seeds_for(0, 5))) == 5

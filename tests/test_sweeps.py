@@ -212,3 +212,18 @@ def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path):
         assert f"hydra.sweep.dir={tmp_path}/" in line
     report = [l for l in lines if l.startswith("parallax-report ")]
     assert len(report) == 1 and "--out docs/results" in report[0]
+
+
+def test_a_bad_job_fails_alone_in_a_joblib_sweep(tmp_path, tiny_overrides):
+    """One job with an invalid value must not take the launcher's other jobs down with it."""
+    sweep_dir = tmp_path / "sweep"
+    overrides = [o for o in tiny_overrides if not o.startswith("distance.queue_size")]
+    cmd = [sys.executable, "-m", "parallax.train", "-m", *overrides, "distance.queue_size=3,0",
+           "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", f"hydra.sweep.dir={sweep_dir}",
+           _name_without(overrides)]
+    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert proc.returncode != 0  # the sweep reports the failure …
+    assert "distance.queue_size" in proc.stdout + proc.stderr
+    summaries = _summaries(sweep_dir)  # … but the valid job ran to its end
+    assert list(summaries) == ["distance.queue_size=3"]
+    assert summaries["distance.queue_size=3"]["presentations"] == 6

@@ -77,6 +77,16 @@ def _cli(run_dir: Path, overrides: list[str]) -> list[str]:
     return [sys.executable, "-m", "parallax.train", *overrides, f"hydra.run.dir={run_dir}"]
 
 
+def test_resume_drops_a_torn_log_line(tmp_path, tiny_overrides):
+    _train(tmp_path / "full", tiny_overrides)
+    _train(tmp_path / "part", tiny_overrides + ["train.presentations=4"])
+    with (tmp_path / "part" / "metrics.jsonl").open("a") as log:
+        log.write('{"presentation": 5, "ste')  # a hard kill in the middle of a write
+    _train(tmp_path / "part", tiny_overrides)
+    assert ((tmp_path / "part" / "metrics.jsonl").read_text()
+            == (tmp_path / "full" / "metrics.jsonl").read_text())
+
+
 def test_sigkill_then_resume_gives_the_same_summary(tmp_path, tiny_overrides):
     overrides = tiny_overrides + ["train.presentations=10", "train.checkpoint_every=1"]
     ref = tmp_path / "ref"
@@ -105,8 +115,17 @@ def test_sigkill_then_resume_gives_the_same_summary(tmp_path, tiny_overrides):
 def test_perturbation_switches_on_mid_run(tmp_path, tiny_overrides):
     summary = _train(tmp_path, tiny_overrides + ["perturbation=rotate_blur", "perturbation.start_fraction=0.5"])
     records = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
-    assert [r["perturbed"] for r in records] == [False, False, True, True, True, True]
+    # presentations 1-3 ran unperturbed, 4-6 perturbed
+    assert [r["perturbed"] for r in records] == [False, False, False, True, True, True]
     assert summary["before_perturbation"]["presentations"] == 3
+    assert (tmp_path / "checkpoint_before_perturbation.pt").is_file()
+    from parallax.evaluate import evaluate
+
+    before = evaluate(tmp_path, distances=[4.0], between=[], out=tmp_path / "eval_before",
+                      checkpoint_name="checkpoint_before_perturbation.pt")
+    after = evaluate(tmp_path, distances=[4.0], between=[])
+    assert before["perturbed"] is False and before["presentations"] == 3
+    assert after["perturbed"] is True and after["presentations"] == 6
 
 
 def test_staged_curriculum_widens_the_list(tmp_path, tiny_overrides):
