@@ -61,10 +61,11 @@ def machine_limits(threads: int) -> dict[str, float]:
 def coder_work_per_frame(cfg) -> dict[str, float]:
     """Floating-point operations and bytes moved by the coder for one frame pair (all scales).
 
-    Counted for the Gram-matrix matching pursuit and the dense dictionary gradient as
-    implemented: correlations X·Φᵀ (2PKN), Gram ΦΦᵀ (2N²K), k steps of C ← C − c·G[j] (2kPN),
-    reconstruction B·Φ (2PNK) and the gradient Rᵀ·B (2PKN). Bytes: the patches, dictionary and
-    Gram read once, the correlation matrix read and written at each of the k steps.
+    Counted as the coder computes them: correlations X·Φᵀ (2PKN), the Gram matrix ΦΦᵀ (2N²K),
+    k steps of C ← C − c·G[j] (2kPN), the reconstruction from the k picks (2PkK), the sparse
+    dictionary gradient Bᵀ·R from the picks (2PkK) and the pooled activities (2PN). Bytes: the
+    patches and the dictionary read about three times, the Gram matrix once, the correlation
+    matrix read and written at each of the k steps, the dense codes written and read once.
     """
     from parallax.coding.retina import ScaleSpec
 
@@ -74,8 +75,8 @@ def coder_work_per_frame(cfg) -> dict[str, float]:
         spec = cfg.coder.scale_specs[scale]
         geometry = ScaleSpec.from_mapping(scale, spec)
         P, K = geometry.patch_count, geometry.dim
-        flops += 2 * P * K * N + 2 * N * N * K + 2 * k * P * N + 2 * P * N * K + 2 * P * K * N
-        bytes_moved += 4 * (3 * P * K + 3 * N * K + N * N + 2 * (k + 1) * P * N)
+        flops += 2 * P * K * N + 2 * N * N * K + 2 * k * P * N + 4 * P * k * K + 2 * P * N
+        bytes_moved += 4 * (3 * P * K + 3 * N * K + N * N + 2 * (k + 1) * P * N + 2 * P * N)
     return {"flops": flops, "bytes": bytes_moved}
 
 
