@@ -130,7 +130,7 @@ def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1,
     bound_ms = max(work["flops"] / (limits["matmul_gflops"] * 1e9),
                    work["bytes"] / (limits["copy_gbps"] * 1e9)) * 1e3
     report["roofline"] = {**limits, **work, "coder_bound_ms_per_frame": bound_ms}
-    coder_ms = report.get("components_ms", {}).get("coder", {}).get("encode_learn_B1_ms")
+    coder_ms = report.get("components_ms", {}).get("coder", {}).get("encode_update_both_B1_gram_ms")
     if coder_ms:
         report["roofline"]["coder_measured_over_bound"] = coder_ms / bound_ms
     for dev, by_b in report["end_to_end"].items():
