@@ -1,0 +1,31 @@
+"""parallax-bench runs end to end and reports every part; it asserts no speed (shared machine)."""
+
+from __future__ import annotations
+
+import json
+
+from parallax import bench
+from parallax.config import compose
+
+
+def test_coder_work_counts_the_paper_patches():
+    cfg = compose()
+    both = bench.coder_work_per_frame(cfg)
+    coarse = bench.coder_work_per_frame(compose(["coder.scales=[coarse]"]))
+    fine = bench.coder_work_per_frame(compose(["coder.scales=[fine]"]))
+    assert both["flops"] == coarse["flops"] + fine["flops"]
+    N, K, k = 288, 200, 10
+    # 529 coarse patches (23×23 after ×8), 289 fine ones (17×17 after ×2)
+    assert coarse["flops"] == 2 * 529 * K * N + 2 * N * N * K + 2 * k * 529 * N + 4 * 529 * k * K + 2 * 529 * N
+    assert fine["flops"] < coarse["flops"]
+
+
+def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    bench.main(["--no-components", "--robots", "1", "--presentations", "1", "--json", str(out)])
+    printed = capsys.readouterr().out
+    assert "[end to end]" in printed and "[roofline]" in printed
+    report = json.loads(out.read_text())
+    assert report["end_to_end"]["cpu"]["B=1"]["steps_per_second"] > 0
+    assert report["roofline"]["coder_bound_ms_per_frame"] > 0
+    assert report["roofline"]["matmul_gflops"] > 0 and report["roofline"]["copy_gbps"] > 0
