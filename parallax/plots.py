@@ -13,6 +13,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def mae_curves(records: Sequence[dict], path: str | Path, title: str = "Eye-movement MAE",
                perturbation_at: int | None = None) -> Path:
     """Fig. 7–9: the sliding-window MAE (eq. 16) per lateral position against trials."""
@@ -32,10 +39,7 @@ def mae_curves(records: Sequence[dict], path: str | Path, title: str = "Eye-move
     ax.set_yscale("log")
     ax.set_title(title)
     ax.legend(fontsize=6, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def mae_per_position(results: dict[str, dict[str, float]], path: str | Path) -> Path:
@@ -51,10 +55,7 @@ def mae_per_position(results: dict[str, dict[str, float]], path: str | Path) -> 
     ax.set_xlabel("lateral position (cm)")
     ax.set_ylabel("MAE (deg)")
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def error_vs_distance(curves: dict[str, tuple[Sequence[float], Sequence[float]]], path: str | Path,
@@ -68,10 +69,7 @@ def error_vs_distance(curves: dict[str, tuple[Sequence[float], Sequence[float]]]
     ax.set_ylabel("error (%)")
     ax.set_title(title)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 # --- figures of `parallax-report` (several seeds per curve) ---------------------------------------
@@ -106,10 +104,7 @@ def mean_sd_curves(curves: dict[str, tuple[Sequence[float], Sequence[float], Seq
         ax.set_yscale("log")
     ax.set_title(title)
     ax.legend(fontsize=6, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def error_vs_distance_with_band(lines: dict[str, tuple[Sequence[float], Sequence[float]]], path: str | Path,
@@ -136,10 +131,7 @@ def error_vs_distance_with_band(lines: dict[str, tuple[Sequence[float], Sequence
     ax.set_ylabel("error (%)")
     ax.set_title(title)
     ax.legend(fontsize=6)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def ablation_bars(labels: Sequence[str], panels: dict[str, tuple[Sequence[float], Sequence[float]]],
@@ -158,7 +150,4 @@ def ablation_bars(labels: Sequence[str], panels: dict[str, tuple[Sequence[float]
         ax.set_xticks(x, labels, rotation=30, ha="right", fontsize=7)
         ax.set_title(name, fontsize=9)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
