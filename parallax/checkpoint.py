@@ -8,8 +8,10 @@ so a kill at any moment leaves either the old or the new checkpoint, never half 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import random
+import signal
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -22,19 +24,41 @@ CHECKPOINT_NAME = "checkpoint.pt"
 BEFORE_PERTURBATION_NAME = "checkpoint_before_perturbation.pt"
 
 
+#: Signals a scheduler sends to stop or preempt a job (SLURM: USR2 before a requeue, TERM).
+_DEFERRED_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGUSR1, signal.SIGUSR2}
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold stop/preempt signals until the block ends, then let them through.
+
+    A handler that runs in the middle of torch.save (submitit's requeue handler, a Ctrl-C) tears
+    the zip writer and fails the job; held back, the signal arrives right after the rename.
+    """
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 def save_atomic(state: dict[str, Any], path: str | Path) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(state, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with _signals_deferred():
+        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                torch.save(state, f)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
 
 
 def load(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:

@@ -148,3 +148,25 @@ def test_eval_writes_json_and_figures(tmp_path, tiny_overrides):
     assert (tmp_path / "eval_mae_per_position.png").is_file()
     assert (tmp_path / "mae_curves.png").is_file()
     assert "distance" in result and "total" in result["distance"]["by_range"]
+
+
+def test_a_stop_signal_during_a_checkpoint_write_waits_for_the_rename(tmp_path):
+    """SIGUSR2 (a scheduler's preemption) raised while the checkpoint is written is held back
+    until the file is complete, then delivered."""
+    import signal as sig
+
+    from parallax import checkpoint
+
+    seen = []
+    old = sig.signal(sig.SIGUSR2, lambda *_: seen.append((tmp_path / "c.pt").exists()))
+    try:
+        class Raise:  # pickled by torch.save: raises the signal in the middle of the write
+            def __reduce__(self):
+                os.kill(os.getpid(), sig.SIGUSR2)
+                return (dict, ())
+
+        checkpoint.save_atomic({"a": list(range(1000)), "b": Raise()}, tmp_path / "c.pt")
+    finally:
+        sig.signal(sig.SIGUSR2, old)
+    assert seen == [True]  # delivered once, after the rename
+    assert checkpoint.load(tmp_path / "c.pt")["a"][-1] == 999
