@@ -13,6 +13,7 @@ import os
 import random
 import signal
 import tempfile
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -30,19 +31,31 @@ _DEFERRED_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGUSR1, signal.SIGUS
 
 @contextlib.contextmanager
 def _signals_deferred():
-    """Hold stop/preempt signals until the block ends, then let them through.
+    """Hold stop/preempt signals until the block ends, then deliver them.
 
     A handler that runs in the middle of torch.save (submitit's requeue handler, a Ctrl-C) tears
-    the zip writer and fails the job; held back, the signal arrives right after the rename.
+    the zip writer and fails the job. Masking the thread is not enough — another thread (the
+    TensorBoard writer's) would take the signal and Python would still run the handler at once —
+    so the Python-level handlers are swapped for recorders and the signals raised again after.
+    Handlers can only be set from the main thread; elsewhere the write is not protected.
     """
-    if not hasattr(signal, "pthread_sigmask"):
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED_SIGNALS)
+    pending: list[int] = []
+    previous = {}
+    for signum in _DEFERRED_SIGNALS:
+        handler = signal.getsignal(signum)
+        if handler is not None:  # None: installed outside Python, cannot be put back
+            previous[signum] = handler
+            signal.signal(signum, lambda received, frame: pending.append(received))
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        for signum in pending:
+            signal.raise_signal(signum)
 
 
 def save_atomic(state: dict[str, Any], path: str | Path) -> None:
