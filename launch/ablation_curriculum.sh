@@ -7,9 +7,5 @@
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
-sweep="$(px_sweep_dir ablation_curriculum)"
-status=0
-px_sweep "$sweep" curriculum=single_20,multi_5_20,staged "seed=${SEEDS:-0,1,2}" "$@" || status=$?
-px_eval "$sweep" || status=$?
-px_report "$report_root/ablations" curriculum.md "Ablation: curriculum (paper §3.2)" ablation "$sweep"
-exit "$status"
+px_ablation curriculum "Ablation: curriculum (paper §3.2)" \
+  curriculum=single_20,multi_5_20,staged "seed=${SEEDS:-0,1,2}" "$@"

@@ -9,11 +9,5 @@
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
-sweep="$(px_sweep_dir ablation_feature_norm)"
-status=0
-modes=none,l1_per_scale,zscore,centred_unit,zscore_unit
-px_sweep "$sweep" "policy.feature_norm=$modes" "seed=${SEEDS:-0,1,2}" "$@" || status=$?
-px_eval "$sweep" || status=$?
-px_report "$report_root/ablations" feature_norm.md "Ablation: policy feature normalisation (paper §3.4)" ablation \
-  "$sweep"
-exit "$status"
+px_ablation feature_norm "Ablation: policy feature normalisation (paper §3.4)" \
+  policy.feature_norm=none,l1_per_scale,zscore,centred_unit,zscore_unit "seed=${SEEDS:-0,1,2}" "$@"

@@ -90,3 +90,16 @@ px_report() {
   shift 4
   px_run parallax-report "$@" --out "$out" --name "$name" --title "$title" --tables "$tables"
 }
+
+# px_ablation NAME TITLE SWEEP_ARGS...   the usual one-sweep ablation: sweep into
+# $SWEEP_ROOT/ablation_NAME, evaluate, report into $REPORT_ROOT/ablations/NAME.md; returns
+# non-zero if the sweep or an evaluation failed (the report is written either way).
+px_ablation() {
+  local name="$1" title="$2" sweep status=0
+  shift 2
+  sweep="$(px_sweep_dir "ablation_$name")"
+  px_sweep "$sweep" "$@" || status=$?
+  px_eval "$sweep" || status=$?
+  px_report "$report_root/ablations" "$name.md" "$title" ablation "$sweep"
+  return "$status"
+}

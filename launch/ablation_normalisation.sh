@@ -7,10 +7,5 @@
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
-sweep="$(px_sweep_dir ablation_normalisation)"
-status=0
-px_sweep "$sweep" coder.normalisation=per_half,joint "seed=${SEEDS:-0,1,2}" "$@" || status=$?
-px_eval "$sweep" || status=$?
-px_report "$report_root/ablations" normalisation.md "Ablation: patch normalisation (paper §3.3)" \
-  ablation "$sweep"
-exit "$status"
+px_ablation normalisation "Ablation: patch normalisation (paper §3.3)" \
+  coder.normalisation=per_half,joint "seed=${SEEDS:-0,1,2}" "$@"

@@ -6,10 +6,5 @@
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
-sweep="$(px_sweep_dir ablation_pan_reset)"
-status=0
-px_sweep "$sweep" env.pan_reset=true,false "seed=${SEEDS:-0,1,2}" "$@" || status=$?
-px_eval "$sweep" || status=$?
-px_report "$report_root/ablations" pan_reset.md "Ablation: pan reset between lateral positions" \
-  ablation "$sweep"
-exit "$status"
+px_ablation pan_reset "Ablation: pan reset between lateral positions" \
+  env.pan_reset=true,false "seed=${SEEDS:-0,1,2}" "$@"

@@ -9,9 +9,5 @@
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
-sweep="$(px_sweep_dir ablation_queue)"
-status=0
-px_sweep "$sweep" distance.queue_size=50,100,300,1000 "seed=${SEEDS:-0,1,2}" "$@" || status=$?
-px_eval "$sweep" || status=$?
-px_report "$report_root/ablations" queue.md "Ablation: queue size c (paper eq. 9)" ablation "$sweep"
-exit "$status"
+px_ablation queue "Ablation: queue size c (paper eq. 9)" \
+  distance.queue_size=50,100,300,1000 "seed=${SEEDS:-0,1,2}" "$@"

@@ -8,9 +8,5 @@
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
-sweep="$(px_sweep_dir ablation_scales)"
-status=0
-px_sweep "$sweep" coder=coarse,fine,two_scale "seed=${SEEDS:-0,1,2}" "$@" || status=$?
-px_eval "$sweep" || status=$?
-px_report "$report_root/ablations" scales.md "Ablation: coarse and fine scales (paper §3.3)" ablation "$sweep"
-exit "$status"
+px_ablation scales "Ablation: coarse and fine scales (paper §3.3)" \
+  coder=coarse,fine,two_scale "seed=${SEEDS:-0,1,2}" "$@"
