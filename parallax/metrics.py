@@ -38,6 +38,12 @@ class EyeMovementTracker:
     def mae(self) -> float:
         return float(np.mean(self.overall)) if self.overall else float("nan")
 
+    def recent_mae(self, n: int = 100) -> float:
+        """Mean error of the last ``n`` trials (all positions): early learning shows here long
+        before it moves the eq. (16) window."""
+        tail = list(self.overall)[-n:]
+        return float(np.mean(tail)) if tail else float("nan")
+
     def mae_per_position(self) -> dict[str, float]:
         return {k: float(np.mean(v)) if v else float("nan") for k, v in self.per_position.items()}
 

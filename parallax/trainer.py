@@ -128,6 +128,7 @@ class Trainer:
             **{f"e_{k}": v for k, v in pres.errors.items()},
             **{f"policy_{k}": v for k, v in pres.policy_stats.items()},
             "mae": self.eye.mae(), "mae_per_position": self.eye.mae_per_position(),
+            "mae_recent": self.eye.recent_mae(int(self.cfg.metrics.summary_trials)),
             "distance_error": self.dist.by_range(),
             **{f"lm_{k}": v for k, v in self.last_distance_stats.items()},
         }
@@ -169,6 +170,7 @@ class Trainer:
             elif k.startswith("lm_"):
                 writer.add_scalar(f"distance/lm_{k[3:]}", v, step)
         writer.add_scalar("pursuit/mae", record["mae"], step)
+        writer.add_scalar("pursuit/mae_recent", record["mae_recent"], step)
         for label, v in record["mae_per_position"].items():
             writer.add_scalar(f"pursuit/mae_{label}cm", v, step)
         for rng, v in record["distance_error"].items():
@@ -221,11 +223,13 @@ class Trainer:
                     dist_total = record["distance_error"].get("total")
                     if interactive:
                         bar.set_postfix(steps_s=f"{sps:.0f}", mae=f"{record['mae']:.3f}",
+                                        recent=f"{record['mae_recent']:.3f}",
                                         dist=f"{dist_total:.2f}%" if dist_total is not None else "-")
                         bar.update(1)
                     elif self.presentation % log_every == 0 or self.presentation == total:
                         print(f"[parallax] presentation {self.presentation}/{total}  "
-                              f"steps/s {sps:.0f}  MAE {record['mae']:.3f}°  distance error "
+                              f"steps/s {sps:.0f}  MAE {record['mae']:.3f}° "
+                              f"(last {int(cfg.metrics.summary_trials)} trials {record['mae_recent']:.3f}°)  distance error "
                               + (f"{dist_total:.2f}%" if dist_total is not None else "-"), flush=True)
                     if self.presentation % int(cfg.train.checkpoint_every) == 0 or self.presentation == total:
                         self.save()

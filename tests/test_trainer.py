@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 
 from parallax.config import compose
 from parallax.trainer import Trainer
@@ -46,6 +47,9 @@ def test_run_writes_everything(tmp_path, tiny_overrides):
             "distance/lm_loss", "distance/lm_mu"} <= scalars, scalars
     assert {"coder/atoms_coarse", "coder/atoms_fine", "world/I0_beside_It"} <= set(events.Tags()["images"])
     assert len(events.Scalars("pursuit/mae")) == 6
+    assert "pursuit/mae_recent" in scalars
+    # mae_window=20 trials, summary_trials=100: after 12 trials both cover every trial so far
+    assert records[-1]["mae_recent"] == pytest.approx(records[-1]["mae"])
     saved = json.loads((tmp_path / "summary.json").read_text())
     assert saved["presentations"] == 6 and saved["trials"] == 12
     assert set(saved["mae_per_position"]) == {"5", "10"}
