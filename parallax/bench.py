@@ -25,17 +25,7 @@ from pathlib import Path
 import torch
 
 from parallax.config import compose
-
-
-def _median_ms(fn, repeats: int, warmup: int = 3) -> float:
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t) * 1e3)
-    return statistics.median(times)
+from parallax.timing import interleaved_medians_ms
 
 
 # --- the machine's limits ----------------------------------------------------------------------
@@ -47,11 +37,11 @@ def machine_limits(threads: int) -> dict[str, float]:
         n = 1024
         a, b = torch.randn(n, n), torch.randn(n, n)
         out = torch.empty(n, n)
-        ms = _median_ms(lambda: torch.mm(a, b, out=out), repeats=20)
+        ms = interleaved_medians_ms({"mm": lambda: torch.mm(a, b, out=out)}, repeats=20)["mm"]
         gflops = 2 * n ** 3 / (ms * 1e-3) / 1e9
         src = torch.ones(32 * 2 ** 20)  # 128 MiB: far beyond the caches
         dst = torch.empty_like(src)
-        ms = _median_ms(lambda: dst.copy_(src), repeats=10)
+        ms = interleaved_medians_ms({"copy": lambda: dst.copy_(src)}, repeats=10)["copy"]
         gbps = 2 * src.numel() * 4 / (ms * 1e-3) / 1e9  # one read + one write per element
     finally:
         torch.set_num_threads(previous)

@@ -11,14 +11,14 @@ noise hits them alike; medians are reported in milliseconds. Run as
 from __future__ import annotations
 
 import json
-import statistics
 import sys
-import time
 from typing import Callable
 
 import cv2
 import numpy as np
 import torch
+
+from parallax.timing import interleaved_medians_ms
 
 from .coder import MultiScaleCoder
 
@@ -44,20 +44,6 @@ def _coder(pursuit: str, learn: bool, scales: list[str]) -> MultiScaleCoder:
     return MultiScaleCoder(scales, SCALE_SPECS, atoms=288, sparsity=10, learning_rate=0.2,
                            normalisation="per_half", learn=learn, seed=0, image_size=IMAGE_SIZE,
                            pursuit=pursuit)
-
-
-def _median_ms(operations: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
-    """Median wall time of each operation, interleaved so that they share the machine's noise."""
-    for operation in operations.values():
-        for _ in range(WARM_UP):
-            operation()
-    samples: dict[str, list[float]] = {name: [] for name in operations}
-    for _ in range(repeats):
-        for name, operation in operations.items():
-            start = time.perf_counter()
-            operation()
-            samples[name].append(time.perf_counter() - start)
-    return {name: 1e3 * statistics.median(times) for name, times in samples.items()}
 
 
 def _operations() -> dict[str, Callable[[], object]]:
@@ -91,7 +77,7 @@ def run(repeats: int = 50) -> dict[str, float]:
     for threads, suffix in ((default_threads, ""), (1, "_1thread")):
         torch.set_num_threads(threads)
         try:
-            timings = _median_ms(_operations(), repeats)
+            timings = interleaved_medians_ms(_operations(), repeats, warmup=WARM_UP)
         finally:
             torch.set_num_threads(default_threads)
         for batch in (1, 16):

@@ -10,26 +10,11 @@ environment; plus the resident memory each extra environment costs. Target: a fr
 from __future__ import annotations
 
 import os
-import statistics
 import time
-from typing import Callable
 
 import numpy as np
 
-
-def _interleaved_medians(operations: dict[str, Callable[[], object]], repeats: int,
-                         warmup: int = 5) -> dict[str, float]:
-    """Median ms of each operation, timed in turn so that all see the same machine load."""
-    for _ in range(warmup):
-        for operation in operations.values():
-            operation()
-    times: dict[str, list[float]] = {name: [] for name in operations}
-    for _ in range(repeats):
-        for name, operation in operations.items():
-            start = time.perf_counter()
-            operation()
-            times[name].append((time.perf_counter() - start) * 1e3)
-    return {name: statistics.median(values) for name, values in times.items()}
+from parallax.timing import interleaved_medians_ms
 
 
 def _resident_mb() -> float:
@@ -54,13 +39,13 @@ def run(repeats: int = 50, image_size: int = 256) -> dict[str, float]:
 
     blurred = parallax.envs.load(seed=0, blur_sigma=2.0, **options)
     blurred.reset()
-    results = _interleaved_medians({
+    results = interleaved_medians_ms({
         "render_left_eye_ms": physics.render_left_eye,
         "env_step_ms": step,
         "target_pan_ms": physics.target_pan_deg,
         "render_left_eye_blur2_ms": blurred.physics.render_left_eye,
     }, repeats)
-    results.update(_interleaved_medians({"env_reset_ms": env.reset}, max(5, repeats // 5), warmup=2))
+    results.update(interleaved_medians_ms({"env_reset_ms": env.reset}, max(5, repeats // 5), warmup=2))
     blurred.close()
 
     extra, before = [], _resident_mb()
