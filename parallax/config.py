@@ -17,7 +17,6 @@ from omegaconf import DictConfig, OmegaConf
 #: The Hydra config package; ``conf/`` ships inside the installed package as ``parallax.conf``.
 CONFIG_MODULE = "parallax.conf"
 CONFIG_NAME = "config"
-KNOWN_SCALES = ("coarse", "fine")
 #: File systems refuse names over 255 bytes; longer override lists keep a prefix and a hash.
 MAX_RUN_NAME = 120
 
@@ -73,6 +72,19 @@ def load_run_config(run_dir: str | Path) -> DictConfig:
         raise FileNotFoundError(f"{run_dir} is not a parallax run directory (no {RUN_CONFIG_NAME})")
     register_resolvers()
     return OmegaConf.load(path)
+
+
+def perturbation_start(cfg) -> int | None:
+    """Presentation index at which §5's perturbation is switched on (None: never).
+
+    The one place ``perturbation.start_fraction`` becomes a presentation; the trainer, the
+    evaluation and the report all use it. ``cfg`` may be a DictConfig or a plain dict.
+    """
+    fraction = (cfg.get("perturbation") or {}).get("start_fraction")
+    total = (cfg.get("train") or {}).get("presentations")
+    if fraction is None or total is None:
+        return None
+    return int(round(float(fraction) * int(total)))
 
 
 def _require(cond: bool, key: str, reason: str) -> None:

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from parallax import checkpoint, plots
-from parallax.config import load_run_config
+from parallax.config import load_run_config, perturbation_start
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
 
@@ -77,11 +77,10 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
     try:
         exp.load_state_dict(state["experiment"])
         exp.set_stage(len(exp.stages) - 1)
-        start = cfg.perturbation.get("start_fraction")
+        start = perturbation_start(cfg)
         # Perturbed once a presentation ran after the switch (a checkpoint taken at the switch
         # holds the learnt state from before it).
-        was_perturbed = (start is not None and
-                         state["presentation"] > round(float(start) * int(cfg.train.presentations)))
+        was_perturbed = start is not None and state["presentation"] > start
         perturbed = {"auto": was_perturbed, "on": True, "off": False}[perturbation]
         exp.set_perturbation(perturbed)
         if not exp.distance.is_ready:

@@ -36,6 +36,7 @@ from omegaconf.errors import OmegaConfBaseException
 from yaml import YAMLError
 
 from parallax import paper_results as paper
+from parallax.config import perturbation_start
 from parallax.metrics import position_label
 
 SUMMARY_NAME = "summary.json"
@@ -175,11 +176,7 @@ class Run:
     @property
     def perturbation_start(self) -> int | None:
         """Presentation at which the perturbation is switched on (the trainer's rounding)."""
-        fraction = (self.config.get("perturbation") or {}).get("start_fraction")
-        total = self.total_presentations
-        if fraction is None or total is None:
-            return None
-        return int(round(float(fraction) * total))
+        return perturbation_start(self.config)
 
     # Tables 2–3: eye-movement error of the last trials before / after the perturbation.
     def last_trials(self, phase: str) -> dict | None:

@@ -25,7 +25,7 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from parallax import checkpoint
-from parallax.config import RUN_CONFIG_NAME
+from parallax.config import RUN_CONFIG_NAME, perturbation_start
 from parallax.experiment import Experiment, Presentation
 from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, position_label
 
@@ -44,9 +44,7 @@ class Trainer:
         self.wall_time = 0.0
         self.before_perturbation: dict | None = None
         self.last_distance_stats: dict[str, float] = {}
-        fraction = cfg.perturbation.get("start_fraction")
-        self.perturbation_start = (None if fraction is None
-                                   else int(round(float(fraction) * int(cfg.train.presentations))))
+        self.perturbation_start = perturbation_start(cfg)
 
     # --- paths -----------------------------------------------------------------------------
     @property
