@@ -91,3 +91,18 @@ class DistanceErrorTracker:
 
     def load_state_dict(self, state: dict) -> None:
         self.pairs = deque((tuple(p) for p in state["pairs"]), maxlen=self.window)
+
+
+def learn_online(learner, tracker: DistanceErrorTracker, pans: np.ndarray,
+                 distances: np.ndarray) -> dict[str, float]:
+    """Paper §3.5 online: predict each new s before learning it (the honest online error, kept by
+    `tracker`), then queue it (eq. 9) and fit. Returns the last fit's statistics ({} if none).
+    Shared by the trainer and parallax-replay so that a replay is the run's distance learner."""
+    last: dict[str, float] = {}
+    for s, d in zip(pans, distances):
+        if learner.is_ready:
+            tracker.record(float(np.asarray(learner.predict(np.asarray(s)[None, :])).reshape(-1)[0]), float(d))
+        stats = learner.observe(np.asarray(s, dtype=np.float64), float(d))
+        if stats:
+            last = {k: float(v) for k, v in stats.items()}
+    return last

@@ -6,7 +6,8 @@ Tables 4–5). Everything a run writes lives in its run directory:
 
     config.yaml       the composed config, resolved (Hydra's own record is in .hydra/)
     tb/               TensorBoard events
-    metrics.jsonl     one line per presentation (deterministic: no wall-clock values)
+    metrics.jsonl     one line per presentation (deterministic: no wall-clock values), with the
+                      eye-movement vectors s the distance learner saw (for parallax-replay)
     checkpoint.pt     the latest checkpoint (atomic)
     summary.json      the final summary (and the one before the perturbation)
 """
@@ -27,7 +28,7 @@ from tqdm import tqdm
 from parallax import checkpoint
 from parallax.config import RUN_CONFIG_NAME, perturbation_start
 from parallax.experiment import Experiment, Presentation
-from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, position_label
+from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, learn_online, position_label
 
 
 class Trainer:
@@ -90,14 +91,9 @@ class Trainer:
 
     # --- one presentation ------------------------------------------------------------------
     def _learn_distance(self, pres: Presentation) -> None:
-        """Predict each new s before learning it (the online error), then push it to the queue."""
-        learner = self.exp.distance
-        for s, d in zip(pres.pans, pres.distances):
-            if learner.is_ready:
-                self.dist.record(float(np.asarray(learner.predict(s[None, :])).reshape(-1)[0]), float(d))
-            stats = learner.observe(s, float(d))
-            if stats:
-                self.last_distance_stats = {k: float(v) for k, v in stats.items()}
+        stats = learn_online(self.exp.distance, self.dist, pres.pans, pres.distances)
+        if stats:
+            self.last_distance_stats = stats
 
     def _maybe_advance_stage(self) -> None:
         if self.exp.on_final_list:
@@ -114,7 +110,8 @@ class Trainer:
         for b in range(self.exp.robots):
             for p, label in enumerate(pres.labels):
                 self.eye.record(label, pres.pans[b, p], pres.targets[b, p])
-        if self.exp.on_final_list:
+        learnt_distance = self.exp.on_final_list
+        if learnt_distance:
             self._learn_distance(pres)
         ran_perturbed = self.perturbed  # before the count moves on: how this presentation ran
         self.presentation += 1
@@ -128,6 +125,10 @@ class Trainer:
             "mae": self.eye.mae(), "mae_per_position": self.eye.mae_per_position(),
             "mae_recent": self.eye.recent_mae(int(self.cfg.metrics.summary_trials)),
             "distance_error": self.dist.by_range(),
+            # The eye-movement vectors s and their distances, exactly (JSON floats round-trip), so
+            # parallax-replay can re-run the distance learner alone with another y, c or weighting.
+            "pans": pres.pans.tolist(), "distances": pres.distances.tolist(),
+            "learnt_distance": learnt_distance,
             **{f"lm_{k}": v for k, v in self.last_distance_stats.items()},
         }
         return pres, record

@@ -1,0 +1,149 @@
+"""parallax-replay: the distance learner (paper §3.5–3.5.2, §6) alone, on a finished run's stream.
+
+The distance learner never acts on the world: the eye-movement vectors s it sees depend only on
+the world, the coder and the policy. So a run's metrics.jsonl, which logs every s with its true
+distance in order, lets the learner be re-run with another weighting y, queue size c or weighting
+on/off, and the result is exactly what `parallax-train` would have reported with that setting and
+the same seed (tests/test_replay.py checks this bit for bit). That makes the y, c and weighting
+ablations of Table 4 cost seconds per setting instead of a full run each.
+
+    parallax-replay SOURCE_RUN_OR_MULTIRUN --out DIR distance.y=0,0.5,1,2 distance.queue_size=100,300
+
+Each source run × each combination of the comma-separated values becomes DIR/<run>/<overrides>/
+with config.yaml (the source's, with the overrides applied) and summary.json (the source's eye
+metrics, this learner's online distance errors), so `parallax-report DIR` tables them like runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import sys
+from pathlib import Path
+from typing import Iterable, Sequence
+
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from parallax.config import RUN_CONFIG_NAME, load_run_config, run_name
+from parallax.experiment import seeds_for
+from parallax.metrics import DistanceErrorTracker, learn_online
+
+METRICS_NAME = "metrics.jsonl"
+SUMMARY_NAME = "summary.json"
+
+
+class ReplayError(ValueError):
+    """A source run or an override that cannot be replayed; the message names it."""
+
+
+def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
+    """['distance.y=1,2', 'distance.weighting=false'] → every combination as a list of dotlist items."""
+    axes = []
+    for item in overrides:
+        key, sep, values = item.partition("=")
+        if not sep or not key or not values:
+            raise ReplayError(f"override {item!r} is not KEY=VALUE[,VALUE…]")
+        if not key.startswith("distance."):
+            raise ReplayError(f"override {item!r}: only distance.* settings can be replayed "
+                              "(anything else changes the eye movements: train a new run)")
+        axes.append([f"{key}={v}" for v in values.split(",")])
+    return [list(combo) for combo in itertools.product(*axes)] if axes else [[]]
+
+
+def _read_stream(path: Path) -> list[dict]:
+    records = []
+    for number, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            break  # a line torn by a hard kill ends the usable stream, as on resume
+        if "pans" not in records[-1]:
+            raise ReplayError(f"{path} line {number} has no eye-movement vectors: the run predates "
+                              "parallax-replay (logging of s); train it again to replay it")
+    return records
+
+
+def replay(run_dir: str | Path, overrides: Sequence[str] = ()) -> dict:
+    """The source run's summary with the distance learner re-run under `overrides`."""
+    run_dir = Path(run_dir)
+    cfg = load_run_config(run_dir)
+    summary_path = run_dir / SUMMARY_NAME
+    if not summary_path.is_file():
+        raise ReplayError(f"{run_dir} has no {SUMMARY_NAME}: replay finished runs only")
+    try:
+        cfg.merge_with_dotlist(list(overrides))
+    except Exception as exc:  # OmegaConf's errors are long; one line naming the value is enough
+        raise ReplayError(f"cannot apply {list(overrides)} to {run_dir}: {str(exc).splitlines()[0]}") from None
+    summary = json.loads(summary_path.read_text())
+    robots = int(cfg.env.get("robots", 1))
+    learner = instantiate(cfg.distance, lateral_positions=[float(l) for l in cfg.curriculum.lateral_positions],
+                          seed=seeds_for(int(cfg.seed), robots + 3)[robots + 2])
+    tracker = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
+    before = None
+    records = _read_stream(run_dir / METRICS_NAME)
+    if len(records) < int(summary["presentations"]):
+        raise ReplayError(f"{run_dir / METRICS_NAME} has {len(records)} presentations, the summary "
+                          f"{summary['presentations']}: the log is incomplete")
+    for record in records[: int(summary["presentations"])]:
+        if record["perturbed"] and before is None:
+            before = tracker.by_range()
+        if record["learnt_distance"]:
+            learn_online(learner, tracker, record["pans"], record["distances"])
+    summary["distance_error"] = tracker.by_range()
+    if summary.get("before_perturbation") is not None:
+        summary["before_perturbation"]["distance_error"] = before or {}
+    summary["replayed_from"] = str(run_dir)
+    summary["replay_overrides"] = list(overrides)
+    return {"config": cfg, "summary": summary}
+
+
+def find_sources(paths: Iterable[str | Path]) -> list[Path]:
+    """Finished runs (summary.json beside config.yaml) at or below each path."""
+    found: list[Path] = []
+    for path in map(Path, paths):
+        if not path.is_dir():
+            raise ReplayError(f"{path} is not a directory (give a run or multirun directory)")
+        runs = sorted(p.parent for p in path.rglob(RUN_CONFIG_NAME)
+                      if (p.parent / SUMMARY_NAME).is_file() and ".hydra" not in p.parts)
+        if not runs:
+            raise ReplayError(f"{path} holds no finished run ({RUN_CONFIG_NAME} with {SUMMARY_NAME})")
+        found += runs
+    return found
+
+
+def write_replay(result: dict, out_dir: Path) -> None:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / RUN_CONFIG_NAME).write_text(OmegaConf.to_yaml(result["config"], resolve=True))
+    (out_dir / SUMMARY_NAME).write_text(json.dumps(result["summary"], indent=2) + "\n")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="parallax-replay", description=__doc__.split("\n\n")[0])
+    parser.add_argument("sources", nargs="+", metavar="RUN_OR_MULTIRUN_DIR_OR_OVERRIDE",
+                        help="finished runs (or folders holding them), then distance.KEY=V1,V2 overrides")
+    parser.add_argument("--out", required=True, help="folder for the replayed runs")
+    args = parser.parse_args(argv)
+    overrides = [s for s in args.sources if "=" in s]
+    paths = [s for s in args.sources if "=" not in s]
+    try:
+        combos = parse_sweep(overrides)
+        sources = find_sources(paths)
+        out = Path(args.out)
+        for source in sources:
+            for combo in combos:
+                target = out / source.name / run_name(",".join(combo))
+                result = replay(source, combo)
+                write_replay(result, target)
+                total = result["summary"]["distance_error"].get("total")
+                shown = f"{total:.2f}%" if total is not None else "— (queue never filled)"
+                print(f"[replay] {source.name} {' '.join(combo) or '(as trained)'}: distance error {shown}")
+    except (ReplayError, FileNotFoundError) as exc:
+        sys.exit(f"parallax-replay: {exc}")
+
+
+if __name__ == "__main__":
+    main()

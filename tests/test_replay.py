@@ -1,0 +1,71 @@
+"""parallax-replay: the distance learner re-run on a run's logged eye-movement vectors s must be
+exactly the run's own distance learner (same seed, same settings), and must respond to y/c."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from parallax.config import compose, load_run_config
+from parallax.distance.replay import ReplayError, main, parse_sweep, replay
+from parallax.trainer import Trainer
+
+
+@pytest.fixture(scope="module")
+def perturbed_run(tmp_path_factory):
+    from tests.conftest import TINY
+
+    run = tmp_path_factory.mktemp("run")
+    # 8 presentations, queue c = 3, weighting on, perturbation from presentation 4
+    cfg = compose(TINY + ["train.presentations=8", "distance.weighting=true", "distance.y=1.0",
+                          "perturbation=rotate_blur", "perturbation.start_fraction=0.5"])
+    trainer = Trainer(cfg, run)
+    try:
+        trainer.fit()
+    finally:
+        trainer.exp.close()
+    return run
+
+
+def test_replay_as_trained_is_bit_identical(perturbed_run):
+    trained = json.loads((perturbed_run / "summary.json").read_text())
+    result = replay(perturbed_run)["summary"]
+    assert trained["distance_error"], "the tiny run must have made online predictions"
+    # compared as JSON text: empty ranges are NaN, and NaN != NaN
+    assert json.dumps(result["distance_error"]) == json.dumps(trained["distance_error"])
+    assert (json.dumps(result["before_perturbation"]["distance_error"])
+            == json.dumps(trained["before_perturbation"]["distance_error"]))
+    assert result["mae_per_position"] == trained["mae_per_position"]
+
+
+def test_replay_with_other_settings_changes_the_learner(perturbed_run):
+    trained = json.loads((perturbed_run / "summary.json").read_text())
+    other = replay(perturbed_run, ["distance.y=8", "distance.weighting=true"])
+    assert other["config"].distance.y == 8
+    bigger = replay(perturbed_run, ["distance.queue_size=4"])["summary"]
+    # a larger queue fills one presentation later: one prediction fewer in the online window
+    assert json.dumps(bigger["distance_error"]) != json.dumps(trained["distance_error"])
+
+
+def test_cli_writes_run_like_folders(perturbed_run, tmp_path, capsys):
+    main([str(perturbed_run), "distance.queue_size=3,4", "--out", str(tmp_path / "out")])
+    written = sorted(p.parent.name for p in (tmp_path / "out").rglob("summary.json"))
+    assert written == ["distance.queue_size=3", "distance.queue_size=4"]
+    cfg = load_run_config(next((tmp_path / "out").rglob("distance.queue_size=4")))
+    assert cfg.distance.queue_size == 4
+    assert "distance error" in capsys.readouterr().out
+
+
+def test_bad_overrides_are_refused_with_the_value():
+    with pytest.raises(ReplayError, match="coder.atoms=4"):
+        parse_sweep(["coder.atoms=4"])
+    with pytest.raises(ReplayError, match="'distance.y'"):
+        parse_sweep(["distance.y"])
+    assert parse_sweep(["distance.y=1,2", "distance.weighting=false"]) == [
+        ["distance.y=1", "distance.weighting=false"], ["distance.y=2", "distance.weighting=false"]]
+
+
+def test_a_folder_without_runs_is_refused(tmp_path):
+    with pytest.raises(SystemExit, match="holds no finished run"):
+        main([str(tmp_path), "--out", str(tmp_path / "out")])
