@@ -9,12 +9,20 @@
 #   px_eval SWEEP_DIR            parallax-eval every finished run whose eval.json is missing or
 #                                older than its checkpoint (N_JOBS at a time; log in RUN/eval.log).
 #   px_report OUT NAME TITLE TABLES SWEEP_DIR...   parallax-report into OUT/NAME.
+#   px_distance_source ARGS...   the finished runs whose logged eye movements the distance-learner
+#                                ablations (y, c, weighting) replay, in the array distance_sources:
+#                                $SOURCE if set (a glob, e.g. 'outputs/multirun/reproduce/*multi_5_20_weighted*'),
+#                                else the default experiment trained for SEEDS (plus ARGS) into
+#                                $SWEEP_ROOT/ablation_distance_source.
+#   px_replay OUT ARGS...        parallax-replay the distance sources into OUT with distance.* ARGS
+#                                (the part before any perturbation: Table 4's models).
 # Environment:
 #   LAUNCHER=joblib        Hydra launcher: joblib (default, this machine), submitit_local, slurm,
 #                          or your git-ignored local_<site> config (see conf/hydra/launcher/slurm.yaml)
 #   SEEDS=0,1,2            the seeds of every setting (a sweep over seed=…)
 #   N_JOBS=2               parallel jobs for joblib and for parallax-eval (default: the 2 cores)
 #   SWEEP_ROOT=outputs/multirun
+#   SOURCE=GLOB            runs to replay for the y / c ablations instead of training new ones
 #   REPORT_ROOT=docs/results    where the reports go
 #   PARALLAX_EVAL=0        skip parallax-eval (the report then uses the trainer's online errors)
 #   PARALLAX_DRY_RUN=1     print the commands instead of running them (and skip the .venv set-up)
@@ -102,4 +110,20 @@ px_ablation() {
   px_eval "$sweep" || status=$?
   px_report "$report_root/ablations" "$name.md" "$title" ablation "$sweep"
   return "$status"
+}
+
+px_distance_source() {
+  if [[ -n "${SOURCE:-}" ]]; then
+    # shellcheck disable=SC2206  # the glob is meant to expand
+    distance_sources=( $SOURCE )
+    return 0
+  fi
+  distance_sources=("$(px_sweep_dir ablation_distance_source)")
+  px_sweep "${distance_sources[0]}" "seed=${SEEDS:-0,1,2}" "$@"
+}
+
+px_replay() {
+  local out="$1"
+  shift
+  px_run parallax-replay "${distance_sources[@]}" --out "$out" --until-perturbation "$@"
 }

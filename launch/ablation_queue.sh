@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
-# Issue 9 ablation — the queue size c of eq. (9) (paper §3.5; the paper uses 300): c ∈ {50, 100,
-# 300, 1000}, three seeds each, on the default experiment (5–20 cm with weighting).
-# The distance learner starts only once its queue is full, i.e. after c presentations: give the
-# runs train.presentations well above 1000 or the c = 1000 row has no distance error at all
-# (the report shows "—" there rather than hiding it).
-# Extra arguments are Hydra overrides for every job, e.g.  bash launch/ablation_queue.sh train.presentations=2000
-# Report: docs/results/ablations/queue.md. Environment settings: launch/ablation_lib.sh.
+# Issue 9 — the queue size c of eq. (9) on the default curriculum (5–20 cm), three seeds. Like
+# launch/ablation_y.sh, the eye movements of one run per seed are replayed through distance
+# learners with each c (parallax-replay). A c larger than the presentations replayed never fills
+# and has no distance error: the report shows it empty, which is the finding.
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
-px_ablation queue "Ablation: queue size c (paper eq. 9)" \
-  distance.queue_size=50,100,300,1000 "seed=${SEEDS:-0,1,2}" "$@"
+out="$(px_sweep_dir ablation_queue)"
+status=0
+px_distance_source "$@" || status=$?
+px_replay "$out" distance.queue_size=50,100,300,1000 || status=$?
+px_report "$report_root/ablations" queue.md "Ablation: queue size c (paper eq. 9)" ablation "$out"
+exit "$status"

@@ -48,6 +48,17 @@ def test_replay_with_other_settings_changes_the_learner(perturbed_run):
     assert json.dumps(bigger["distance_error"]) != json.dumps(trained["distance_error"])
 
 
+def test_until_perturbation_is_the_unperturbed_run(perturbed_run):
+    trained = json.loads((perturbed_run / "summary.json").read_text())
+    cut = replay(perturbed_run, until_perturbation=True)
+    before = trained["before_perturbation"]
+    assert cut["summary"]["presentations"] == before["presentations"] == 4
+    assert json.dumps(cut["summary"]["distance_error"]) == json.dumps(before["distance_error"])
+    assert cut["summary"]["mae_per_position"] == before["mae_per_position"]
+    assert cut["config"].train.presentations == 4 and cut["config"].perturbation.start_fraction is None
+    assert cut["config"].perturbation.camera_rotation_deg == 0.0
+
+
 def test_cli_writes_run_like_folders(perturbed_run, tmp_path, capsys):
     main([str(perturbed_run), "distance.queue_size=3,4", "--out", str(tmp_path / "out")])
     written = sorted(p.parent.name for p in (tmp_path / "out").rglob("summary.json"))
@@ -55,6 +66,11 @@ def test_cli_writes_run_like_folders(perturbed_run, tmp_path, capsys):
     cfg = load_run_config(next((tmp_path / "out").rglob("distance.queue_size=4")))
     assert cfg.distance.queue_size == 4
     assert "distance error" in capsys.readouterr().out
+    # parallax-report reads the replays as runs and tables the factor that varies
+    from parallax.report import build_report
+
+    text, data = build_report([tmp_path / "out"], out=tmp_path / "report", tables="ablation")
+    assert "distance.queue_size" in text
 
 
 def test_bad_overrides_are_refused_with_the_value():

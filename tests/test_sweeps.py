@@ -227,3 +227,21 @@ def test_a_bad_job_fails_alone_in_a_joblib_sweep(tmp_path, tiny_overrides):
     summaries = _summaries(sweep_dir)  # … but the valid job ran to its end
     assert list(summaries) == ["distance.queue_size=3"]
     assert summaries["distance.queue_size=3"]["presentations"] == 6
+
+
+@pytest.mark.parametrize("script", ["ablation_y.sh", "ablation_queue.sh"])
+def test_distance_ablations_replay_their_source_runs(script, tmp_path):
+    """y and c only change the distance learner: the scripts replay logged eye movements."""
+    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
+    trained = subprocess.run(["bash", str(REPO / "launch" / script)], cwd=tmp_path, env=env,
+                             capture_output=True, text=True, timeout=60)
+    replays = [l for l in trained.stdout.splitlines() if l.startswith("parallax-replay ")]
+    assert replays and all(f"{tmp_path}/ablation_distance_source --out" in l for l in replays), trained.stdout
+    assert all("--until-perturbation" in l for l in replays)
+    (tmp_path / "runs" / "a").mkdir(parents=True)
+    (tmp_path / "runs" / "b").mkdir()
+    given = subprocess.run(["bash", str(REPO / "launch" / script)], cwd=tmp_path,
+                           env={**env, "SOURCE": f"{tmp_path}/runs/*"}, capture_output=True, text=True, timeout=60)
+    lines = given.stdout.splitlines()
+    assert not [l for l in lines if l.startswith("parallax-train")], given.stdout
+    assert all(f"{tmp_path}/runs/a {tmp_path}/runs/b --out" in l for l in lines if l.startswith("parallax-replay"))

@@ -8,6 +8,7 @@ the same seed (tests/test_replay.py checks this bit for bit). That makes the y, 
 ablations of Table 4 cost seconds per setting instead of a full run each.
 
     parallax-replay SOURCE_RUN_OR_MULTIRUN --out DIR distance.y=0,0.5,1,2 distance.queue_size=100,300
+    parallax-replay … --until-perturbation     # only the part before §5's perturbation
 
 Each source run × each combination of the comma-separated values becomes DIR/<run>/<overrides>/
 with config.yaml (the source's, with the overrides applied) and summary.json (the source's eye
@@ -67,8 +68,14 @@ def _read_stream(path: Path) -> list[dict]:
     return records
 
 
-def replay(run_dir: str | Path, overrides: Sequence[str] = ()) -> dict:
-    """The source run's summary with the distance learner re-run under `overrides`."""
+def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbation: bool = False) -> dict:
+    """The source run's summary with the distance learner re-run under `overrides`.
+
+    ``until_perturbation``: if the run was perturbed, replay only the presentations before §5's
+    perturbation and present the result as a run of that length without one (config and summary
+    alike), so that the ablation tables of parallax-report compare the unperturbed models (Table 4,
+    not Table 5). A run never perturbed is replayed whole.
+    """
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
     summary_path = run_dir / SUMMARY_NAME
@@ -91,14 +98,31 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = ()) -> dict:
     for record in records[: int(summary["presentations"])]:
         if record["perturbed"] and before is None:
             before = tracker.by_range()
+            if until_perturbation:
+                break
         if record["learnt_distance"]:
             learn_online(learner, tracker, record["pans"], record["distances"])
+    if until_perturbation and summary.get("before_perturbation") is not None:
+        return _cut_at_perturbation(cfg, summary, tracker, run_dir, overrides)
     summary["distance_error"] = tracker.by_range()
     if summary.get("before_perturbation") is not None:
         summary["before_perturbation"]["distance_error"] = before or {}
     summary["replayed_from"] = str(run_dir)
     summary["replay_overrides"] = list(overrides)
     return {"config": cfg, "summary": summary}
+
+
+def _cut_at_perturbation(cfg: DictConfig, summary: dict, tracker: DistanceErrorTracker, run_dir: Path,
+                         overrides: Sequence[str]) -> dict:
+    before = summary["before_perturbation"]
+    cut = {k: v for k, v in summary.items() if k not in ("before_perturbation", "timing")}
+    cut.update(before)
+    cut["distance_error"] = tracker.by_range()
+    cut["before_perturbation"] = None
+    cut["replayed_from"], cut["replay_overrides"] = str(run_dir), [*overrides, "until_perturbation"]
+    cfg.train.presentations = int(before["presentations"])
+    cfg.perturbation.merge_with({"camera_rotation_deg": 0.0, "blur_sigma": 0.0, "start_fraction": None})
+    return {"config": cfg, "summary": cut}
 
 
 def find_sources(paths: Iterable[str | Path]) -> list[Path]:
@@ -126,6 +150,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("sources", nargs="+", metavar="RUN_OR_MULTIRUN_DIR_OR_OVERRIDE",
                         help="finished runs (or folders holding them), then distance.KEY=V1,V2 overrides")
     parser.add_argument("--out", required=True, help="folder for the replayed runs")
+    parser.add_argument("--until-perturbation", action="store_true",
+                        help="replay only the presentations before the perturbation, if any (Table 4's models)")
     args = parser.parse_args(argv)
     overrides = [s for s in args.sources if "=" in s]
     paths = [s for s in args.sources if "=" not in s]
@@ -136,7 +162,7 @@ def main(argv: list[str] | None = None) -> None:
         for source in sources:
             for combo in combos:
                 target = out / source.name / run_name(",".join(combo))
-                result = replay(source, combo)
+                result = replay(source, combo, until_perturbation=args.until_perturbation)
                 write_replay(result, target)
                 total = result["summary"]["distance_error"].get("total")
                 shown = f"{total:.2f}%" if total is not None else "— (queue never filled)"
