@@ -382,3 +382,11 @@ def test_a_paper_sized_presentation_with_sixteen_full_size_robots():
     assert finals == pytest.approx([2.9] * 16)
     for env in envs:
         env.close()
+
+
+def test_the_pixels_match_i0_best_at_the_target_pan():
+    """The world itself puts the best image match at α* (so the pursuit MAE is the learner's)."""
+    from parallax.envs.best_match import best_match_offsets
+
+    offsets = best_match_offsets(distance=10.0, lateral=0.2, textures=2, span_deg=0.5, step_deg=0.05)
+    assert all(abs(v) <= 0.1 for values in offsets.values() for v in values), offsets
