@@ -189,7 +189,7 @@ def test_ablation_tables_failed_jobs_and_duplicates(tmp_path):
         for seed in (0, 1):
             summary = write_run(sweep / f"w={weighting},y={y},seed={seed}", cfg, seed, rng)
             distances.setdefault((weighting, y), []).append(summary["distance_error"]["total"])
-            maes.setdefault((weighting, y), []).append(summary["mae_per_position"]["20"])
+            maes.setdefault((weighting, y), []).append(summary["last_trials"]["20"]["mean"])
     # the same job in another sweep (as the baseline of several ablations would be): counted once
     shutil.copytree(sweep / "w=True,y=0.5,seed=0", other_sweep / "w=True,y=0.5,seed=0")
     # a job killed during training and one that failed before the trainer started
@@ -211,7 +211,7 @@ def test_ablation_tables_failed_jobs_and_duplicates(tmp_path):
         assert row[2] == "2"
         header = [c.strip() for c in y_table.splitlines()[0].strip("|").split("|")]
         assert row[header.index("dist. total")] == cell_text(distances[(True, y)])
-        assert row[header.index("MAE 20 cm")] == cell_text(maes[(True, y)], 3)
+        assert row[header.index("last-100 20 cm")] == cell_text(maes[(True, y)], 3)
     assert "False" not in y_table  # the unweighted runs differ in another setting
     weighting_table = table_block(markdown, "**Ablation: `distance.weighting`**")
     assert len(weighting_table.splitlines()) == 2 + 2
