@@ -60,7 +60,7 @@ def test_until_perturbation_is_the_unperturbed_run(perturbed_run):
 
 
 def test_cli_writes_run_like_folders(perturbed_run, tmp_path, capsys):
-    main([str(perturbed_run), "distance.queue_size=3,4", "--out", str(tmp_path / "out")])
+    main([str(perturbed_run), "--out", str(tmp_path / "out"), "distance.queue_size=3,4"])
     written = sorted(p.parent.name for p in (tmp_path / "out").rglob("summary.json"))
     assert written == ["distance.queue_size=3", "distance.queue_size=4"]
     cfg = load_run_config(next((tmp_path / "out").rglob("distance.queue_size=4")))
@@ -76,10 +76,17 @@ def test_cli_writes_run_like_folders(perturbed_run, tmp_path, capsys):
 def test_bad_overrides_are_refused_with_the_value():
     with pytest.raises(ReplayError, match="coder.atoms=4"):
         parse_sweep(["coder.atoms=4"])
-    with pytest.raises(ReplayError, match="'distance.y'"):
+    with pytest.raises(ReplayError, match="'distance.y' is neither an existing directory"):
         parse_sweep(["distance.y"])
     assert parse_sweep(["distance.y=1,2", "distance.weighting=false"]) == [
         ["distance.y=1", "distance.weighting=false"], ["distance.y=2", "distance.weighting=false"]]
+
+
+def test_run_directories_named_with_equals_signs_are_paths(perturbed_run, tmp_path):
+    named = tmp_path / "distance.y=1,seed=0"
+    named.symlink_to(perturbed_run, target_is_directory=True)
+    main([str(named), "--out", str(tmp_path / "out"), "--until-perturbation", "distance.y=2"])
+    assert len(list((tmp_path / "out").rglob("summary.json"))) == 1
 
 
 def test_a_folder_without_runs_is_refused(tmp_path):

@@ -45,7 +45,7 @@ def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
     for item in overrides:
         key, sep, values = item.partition("=")
         if not sep or not key or not values:
-            raise ReplayError(f"override {item!r} is not KEY=VALUE[,VALUE…]")
+            raise ReplayError(f"{item!r} is neither an existing directory nor an override KEY=VALUE[,VALUE…]")
         if not key.startswith("distance."):
             raise ReplayError(f"override {item!r}: only distance.* settings can be replayed "
                               "(anything else changes the eye movements: train a new run)")
@@ -148,13 +148,15 @@ def write_replay(result: dict, out_dir: Path) -> None:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="parallax-replay", description=__doc__.split("\n\n")[0])
     parser.add_argument("sources", nargs="+", metavar="RUN_OR_MULTIRUN_DIR_OR_OVERRIDE",
-                        help="finished runs (or folders holding them), then distance.KEY=V1,V2 overrides")
+                        help="finished runs (or folders holding them) and distance.KEY=V1,V2 overrides")
     parser.add_argument("--out", required=True, help="folder for the replayed runs")
     parser.add_argument("--until-perturbation", action="store_true",
                         help="replay only the presentations before the perturbation, if any (Table 4's models)")
-    args = parser.parse_args(argv)
-    overrides = [s for s in args.sources if "=" in s]
-    paths = [s for s in args.sources if "=" not in s]
+    # intermixed: the overrides may come after the options (as launch/ablation_lib.sh puts them)
+    args = parser.parse_intermixed_args(argv)
+    # Hydra's run directories have '=' in their names: what exists is a path, the rest overrides.
+    paths = [s for s in args.sources if Path(s).exists()]
+    overrides = [s for s in args.sources if not Path(s).exists()]
     try:
         combos = parse_sweep(overrides)
         sources = find_sources(paths)
