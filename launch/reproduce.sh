@@ -34,7 +34,8 @@ px_run parallax-replay "${weighted[@]}" --out "$unweighted" distance.weighting=f
 
 read -ra eval_args <<< "${EVAL_ARGS:---distances 3.0 3.5 4.0 4.5 5.0 5.5 6.0 6.5 7.0 7.5 8.0 8.5 9.0 9.5 10.0}"
 for run in "${weighted[@]}"; do
-  if [[ -f "$run/summary.json" || -n "${PARALLAX_DRY_RUN:-}" ]]; then
+  # evaluate finished runs whose eval.json is missing or older than the checkpoint
+  if [[ -n "${PARALLAX_DRY_RUN:-}" || ( -f "$run/summary.json" && ! "$run/eval.json" -nt "$run/checkpoint.pt" ) ]]; then
     px_run parallax-eval "$run" "${eval_args[@]}" || status=$?
     px_run parallax-eval "$run" "${eval_args[@]}" --checkpoint checkpoint_before_perturbation.pt \
       --out "$run/eval_before" || status=$?
