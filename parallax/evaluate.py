@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from parallax import checkpoint, plots
 from parallax.config import load_run_config, perturbation_start
@@ -68,6 +69,9 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
     run_dir = Path(run_dir)
     out_dir = Path(out) if out else run_dir
     cfg = load_run_config(run_dir)
+    if int(cfg.train.threads) > 0:
+        # as in training: a second intra-op thread made a loaded 2-core machine ~30× slower
+        torch.set_num_threads(int(cfg.train.threads))
     ckpt_path = run_dir / checkpoint_name
     if not ckpt_path.is_file():
         raise FileNotFoundError(f"{run_dir} has no {checkpoint_name}: nothing to evaluate")
