@@ -12,7 +12,8 @@
 # eye movements through a learner without weighting (parallax-replay; the distance learner
 # never acts on the world, so this is exactly what training it would give).
 # Then parallax-eval of the 5–20 cm models before and after the perturbation (held-out
-# textures, distances between the grid points), and the report (results.json beside it).
+# textures, distances between the grid points), their checkpoints copied into
+# docs/results/checkpoints/, and the report (results.json beside it).
 # Extra arguments are Hydra overrides for every training job (they come last, so e.g.
 # train.presentations=2000 lengthens every run). Environment: launch/ablation_lib.sh, plus
 #   EVAL_ARGS   parallax-eval options (default: the grid 3.0, 3.5, …, 10.0 m, one held-out texture each)
@@ -39,6 +40,18 @@ for run in "${weighted[@]}"; do
     px_run parallax-eval "$run" "${eval_args[@]}" || status=$?
     px_run parallax-eval "$run" "${eval_args[@]}" --checkpoint checkpoint_before_perturbation.pt \
       --out "$run/eval_before" || status=$?
+  fi
+done
+
+# The small trained models of the 5–20 cm weighted runs, before and after the perturbation, so
+# that anyone can run parallax-eval on them without training: one folder per seed, a run
+# directory of its own (config.yaml, checkpoint.pt, checkpoint_before_perturbation.pt).
+for run in "${weighted[@]}"; do
+  seed="$(sed -n 's/^seed: //p' "$run/config.yaml" 2>/dev/null || true)"
+  if [[ -n "${PARALLAX_DRY_RUN:-}" || -f "$run/summary.json" ]]; then
+    keep="$report_root/checkpoints/multi_5_20_weighted_seed${seed:-N}"
+    px_run mkdir -p "$keep"
+    px_run cp "$run/config.yaml" "$run/checkpoint.pt" "$run/checkpoint_before_perturbation.pt" "$keep/"
   fi
 done
 
