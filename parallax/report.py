@@ -618,10 +618,11 @@ def eye_movement_table(selection: PaperSelection, phase: str) -> tuple[str, dict
     return "\n".join(text), {"cells": data, "at_or_below_paper": met, "compared": compared}
 
 
-def _distance_values(group: Group, phase: str) -> tuple[list[dict], str] | None:
-    """Per-seed errors by range for a phase: parallax-eval's when every seed has one, else online."""
+def _distance_values(group: Group, phase: str, use_eval: bool = True) -> tuple[list[dict], str] | None:
+    """Per-seed errors by range for a phase: parallax-eval's when every seed has one (and
+    ``use_eval``), else online."""
     evals = [r.eval_for(phase) for r in group.runs]
-    if all(e is not None for e in evals):
+    if use_eval and all(e is not None for e in evals):
         return [(e.get("distance") or {}).get("by_range") or {} for e in evals], EVAL_SOURCE
     online = [r.online_distance(phase) for r in group.runs]
     if any(o is None for o in online):
@@ -635,9 +636,15 @@ def distance_table(selection: PaperSelection, phase: str) -> tuple[str, dict]:
     header = ["Simulation", "group", "n"] + [paper.DISTANCE_RANGE_TITLES[r] for r in paper.DISTANCE_RANGES] + ["source"]
     rows, data, met, compared = [], {}, 0, 0
     totals: dict[str, Stat] = {}
+    # One source for every row, so that rows compare like with like: a frozen model on held-out
+    # textures is far better than the online error during training (a learner replayed by
+    # parallax-replay has only the latter).
+    chosen = [g for g in (selection.rows.get(name) for name in published) if g is not None]
+    use_eval = all(_distance_values(g, phase) is not None and _distance_values(g, phase)[1] == EVAL_SOURCE
+                   for g in chosen)
     for row_name, theirs in published.items():
         group = selection.rows.get(row_name)
-        values = _distance_values(group, phase) if group is not None else None
+        values = _distance_values(group, phase, use_eval) if group is not None else None
         if values is None:
             rows.append([row_name, group.gid if group else "not run", "0"]
                         + [f"— ({theirs[r]:.2f})" for r in paper.DISTANCE_RANGES] + ["—"])
@@ -664,7 +671,7 @@ def distance_table(selection: PaperSelection, phase: str) -> tuple[str, dict]:
              "Cells: ours mean ± sd over seeds (paper); ✓: ours ≤ paper at two decimals. "
              f"Source: `{EVAL_SOURCE}` = frozen model on held-out photographs at 3.0, 3.1, …, 10.0 m; "
              f"`{ONLINE_SOURCE}` = the trainer's predictions of each new s before learning it "
-             "(last 500), used where a seed has no matching eval.json.", "",
+             "(last 500), used for every row when any row has no matching eval.json.", "",
              md_table(header, rows), "", f"Ours at or below the paper in {met} of {compared} cells."]
     weighted, unweighted = totals.get(paper.WEIGHTING_5_20), totals.get(paper.NO_WEIGHTING_5_20)
     if weighted and unweighted and weighted.n and unweighted.n:

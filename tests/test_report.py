@@ -145,30 +145,41 @@ def test_paper_tables_put_ours_beside_the_published_numbers(paper_sweep, tmp_pat
     assert row_of(table3, "20")[1].startswith(cell_text(after))
     assert row_of(table3, "20")[2] == "{:.2f} ({:.2f})".format(*paper.TABLE3[paper.SINGLE]["20"])
 
-    # Table 4: the weighted 5–20 runs have an eval of their before-perturbation checkpoint → used;
-    # the unweighted ones have none → the trainer's online errors, and the table says which.
+    # Table 4: the weighted 5–20 runs have an eval of their before-perturbation checkpoint, the
+    # unweighted ones have none → every row shows the trainer's online errors (like with like),
+    # and the table says so.
     table4 = table_block(markdown, "**Table 4**")
     weighted = row_of(table4, paper.WEIGHTING_5_20)
-    before_evals = [b["distance"]["by_range"] for b, _ in paper_sweep["evals"]["paper_multi_5_20_weighted"]]
+    weighted_online = [s["before_perturbation"]["distance_error"] for s in summaries["paper_multi_5_20_weighted"]]
     for i, r in enumerate(RANGES):
-        assert weighted[3 + i].startswith(cell_text([e[r] for e in before_evals]))
+        assert weighted[3 + i].startswith(cell_text([e[r] for e in weighted_online]))
         assert f"({paper.TABLE4[paper.WEIGHTING_5_20][r]:.2f})" in weighted[3 + i]
-    assert "held-out" in weighted[-1]
+    assert "online" in weighted[-1]
     unweighted = row_of(table4, paper.NO_WEIGHTING_5_20)
     online = [s["before_perturbation"]["distance_error"]["total"] for s in summaries["paper_multi_5_20"]]
     assert unweighted[6].startswith(cell_text(online)) and "online" in unweighted[-1]
-    verdict = "better than" if statistics.fmean([e["total"] for e in before_evals]) < statistics.fmean(online) \
+    verdict = "better than" if statistics.fmean([e["total"] for e in weighted_online]) < statistics.fmean(online) \
         else "not better than"
     assert f"is {verdict} without weighting" in markdown
 
-    table5 = table_block(markdown, "**Table 5**")
+    # with the unweighted row out of the picture, the weighted row's evals are used
+    only_weighted = tmp_path / "only_weighted"
+    for run in paper_sweep["root"].iterdir():
+        if "paper_multi_5_20_weighted" in run.name:
+            shutil.copytree(run, only_weighted / run.name)
+    alone, _ = build_report([only_weighted], tmp_path / "alone", tables="paper")
+    before_evals = [b["distance"]["by_range"] for b, _ in paper_sweep["evals"]["paper_multi_5_20_weighted"]]
+    row = row_of(table_block(alone, "**Table 4**"), paper.WEIGHTING_5_20)
+    assert row[3 + RANGES.index("total")].startswith(cell_text([e["total"] for e in before_evals]))
+    assert "held-out" in row[-1]
+    table5 = table_block(alone, "**Table 5**")
     after_evals = [a["distance"]["by_range"]["7-10"] for _, a in paper_sweep["evals"]["paper_multi_5_20_weighted"]]
     assert row_of(table5, paper.WEIGHTING_5_20)[5].startswith(cell_text(after_evals))
 
     # the small JSON holds the same numbers, the figures exist
     saved = json.loads((out / "results.json").read_text())
     total = saved["paper"]["table4"]["rows"][paper.WEIGHTING_5_20]["ours"]["total"]
-    assert total["n"] == 3 and total["mean"] == pytest.approx(statistics.fmean(e["total"] for e in before_evals))
+    assert total["n"] == 3 and total["mean"] == pytest.approx(statistics.fmean(e["total"] for e in weighted_online))
     assert saved["paper"]["table2"]["cells"][paper.SINGLE]["5"]["paper"] == {"mean": 0.18, "var": 0.10}
     assert (out / "README.md").read_text() == markdown
     for png in saved["figures"]:
