@@ -51,16 +51,20 @@ def run_jobs(exp: Experiment, jobs: list[tuple[float, int]], greedy: bool) -> di
             "distances": np.concatenate(dists)}
 
 
-def distance_results(exp: Experiment, run: dict[str, np.ndarray]) -> dict:
+def distance_results(learner, pans: np.ndarray, distances: np.ndarray) -> dict:
+    """Errors by range and per distance of ``learner`` on the eye-movement vectors ``pans``; the
+    vectors themselves are kept ("samples") so that parallax-replay can score other learners on
+    exactly the same eye movements."""
     from parallax.distance.metrics import distance_error_by_range
 
-    pred = np.asarray(exp.distance.predict(run["pans"]), dtype=np.float64).reshape(-1)
-    true = run["distances"]
+    pred = np.asarray(learner.predict(np.asarray(pans)), dtype=np.float64).reshape(-1)
+    true = np.asarray(distances, dtype=np.float64)
     rel = np.abs(pred - true) / true * 100.0
     per_distance = {}
     for d in np.unique(true):
         per_distance[f"{d:.2f}"] = float(rel[true == d].mean())
-    return {"by_range": distance_error_by_range(pred, true), "per_distance": per_distance}
+    return {"by_range": distance_error_by_range(pred, true), "per_distance": per_distance,
+            "samples": {"pans": np.asarray(pans).tolist(), "distances": true.tolist()}}
 
 
 def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | None = None,
@@ -108,12 +112,14 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
             result["mae"][mode] = float(err.mean())
         curves = {}
         if exp.distance.is_ready:
-            result["distance"] = distance_results(exp, runs["greedy"])
+            result["distance"] = distance_results(exp.distance, runs["greedy"]["pans"], runs["greedy"]["distances"])
             pd = result["distance"]["per_distance"]
             curves["grid (held-out textures)"] = ([float(k) for k in pd], list(pd.values()))
             if between:
                 between_jobs = [(d, i % n_tex) for i, d in enumerate(between)]
-                result["distance_between_grid"] = distance_results(exp, run_jobs(exp, between_jobs, True))
+                between_run = run_jobs(exp, between_jobs, True)
+                result["distance_between_grid"] = distance_results(exp.distance, between_run["pans"],
+                                                                   between_run["distances"])
                 pb = result["distance_between_grid"]["per_distance"]
                 curves["between grid points"] = ([float(k) for k in pb], list(pb.values()))
     finally:

@@ -92,3 +92,24 @@ def test_run_directories_named_with_equals_signs_are_paths(perturbed_run, tmp_pa
 def test_a_folder_without_runs_is_refused(tmp_path):
     with pytest.raises(SystemExit, match="holds no finished run"):
         main([str(tmp_path), "--out", str(tmp_path / "out")])
+
+
+def test_replayed_learners_are_scored_on_the_evals_eye_movements(perturbed_run, tmp_path):
+    from parallax.evaluate import evaluate
+
+    after = evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5])
+    before = evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5], out=perturbed_run / "eval_before",
+                      checkpoint_name="checkpoint_before_perturbation.pt")
+    assert len(after["distance"]["samples"]["pans"]) == 2
+    # as trained: the replayed learners are the run's own, so the evals come back unchanged
+    same = replay(perturbed_run)["evals"]
+    assert json.dumps(same["eval.json"]["distance"]) == json.dumps(after["distance"])
+    assert json.dumps(same["eval_before/eval.json"]["distance_between_grid"]) == json.dumps(before["distance_between_grid"])
+    # cut at the perturbation, the before-eval becomes the run's final eval
+    main([str(perturbed_run), "--out", str(tmp_path / "out"), "--until-perturbation", "distance.queue_size=3"])
+    (written,) = list((tmp_path / "out").rglob("eval.json"))
+    assert written.parent.name == "distance.queue_size=3"
+    assert json.loads(written.read_text())["distance"]["by_range"] == pytest.approx(before["distance"]["by_range"], nan_ok=True)
+    from parallax.report import load_run
+
+    assert load_run(written.parent).final_eval() is not None

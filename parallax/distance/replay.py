@@ -11,13 +11,16 @@ ablations of Table 4 cost seconds per setting instead of a full run each.
     parallax-replay … --until-perturbation     # only the part before §5's perturbation
 
 Each source run × each combination of the comma-separated values becomes DIR/<run>/<overrides>/
-with config.yaml (the source's, with the overrides applied) and summary.json (the source's eye
-metrics, this learner's online distance errors), so `parallax-report DIR` tables them like runs.
+with config.yaml (the source's, with the overrides applied), summary.json (the source's eye
+metrics, this learner's online distance errors) and, where the source has parallax-eval results
+with their eye-movement samples, the same evals with this learner's distance predictions, so
+`parallax-report DIR` tables them like runs.
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import itertools
 import json
 import sys
@@ -90,7 +93,7 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbatio
     learner = instantiate(cfg.distance, lateral_positions=[float(l) for l in cfg.curriculum.lateral_positions],
                           seed=seeds_for(int(cfg.seed), robots + 3)[robots + 2])
     tracker = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
-    before = None
+    before = before_learner = None
     records = _read_stream(run_dir / METRICS_NAME)
     if len(records) < int(summary["presentations"]):
         raise ReplayError(f"{run_dir / METRICS_NAME} has {len(records)} presentations, the summary "
@@ -98,18 +101,52 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbatio
     for record in records[: int(summary["presentations"])]:
         if record["perturbed"] and before is None:
             before = tracker.by_range()
+            before_learner = copy.deepcopy(learner)  # the model of checkpoint_before_perturbation.pt
             if until_perturbation:
                 break
         if record["learnt_distance"]:
             learn_online(learner, tracker, record["pans"], record["distances"])
-    if until_perturbation and summary.get("before_perturbation") is not None:
-        return _cut_at_perturbation(cfg, summary, tracker, run_dir, overrides)
+    cut = until_perturbation and summary.get("before_perturbation") is not None
+    evals = _rescore_evals(run_dir, summary, before_learner, None if cut else learner)
+    if cut:
+        return {**_cut_at_perturbation(cfg, summary, tracker, run_dir, overrides), "evals": evals}
     summary["distance_error"] = tracker.by_range()
     if summary.get("before_perturbation") is not None:
         summary["before_perturbation"]["distance_error"] = before or {}
     summary["replayed_from"] = str(run_dir)
     summary["replay_overrides"] = list(overrides)
-    return {"config": cfg, "summary": summary}
+    return {"config": cfg, "summary": summary, "evals": evals}
+
+
+def _rescore_evals(run_dir: Path, summary: dict, before_learner, final_learner) -> dict[str, dict]:
+    """The source's parallax-eval results with the distances re-predicted by the replayed
+    learners, on the very eye movements the eval recorded (eval.json "samples"); keyed by the
+    eval file's path relative to the run. The frozen eye is the source's, so the eye-movement
+    numbers are kept as they are."""
+    from parallax.evaluate import distance_results
+
+    rescored = {}
+    start = (summary.get("before_perturbation") or {}).get("presentations")
+    for path in [run_dir / "eval.json", *sorted(run_dir.glob("*/eval.json"))]:
+        if not path.is_file():
+            continue
+        result = json.loads(path.read_text())
+        if "samples" not in (result.get("distance") or {}):
+            continue  # an eval from before the samples were kept, or without a ready learner
+        at = int(result.get("presentations", -1))
+        if result.get("perturbed") or start is None:
+            learner = final_learner if at == int(summary["presentations"]) else None
+        else:
+            learner = before_learner if at == start else None
+        if learner is None or not learner.is_ready:
+            continue
+        for key in ("distance", "distance_between_grid"):
+            if key in result and "samples" in result[key]:
+                samples = result[key]["samples"]
+                result[key] = distance_results(learner, samples["pans"], samples["distances"])
+        result["replayed_from"] = str(path)
+        rescored[str(path.relative_to(run_dir))] = result
+    return rescored
 
 
 def _cut_at_perturbation(cfg: DictConfig, summary: dict, tracker: DistanceErrorTracker, run_dir: Path,
@@ -143,6 +180,12 @@ def write_replay(result: dict, out_dir: Path) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / RUN_CONFIG_NAME).write_text(OmegaConf.to_yaml(result["config"], resolve=True))
     (out_dir / SUMMARY_NAME).write_text(json.dumps(result["summary"], indent=2) + "\n")
+    for relative, evaluation in result.get("evals", {}).items():
+        if result["summary"].get("before_perturbation") is None and relative != "eval.json" \
+                and not evaluation.get("perturbed"):
+            relative = "eval.json"  # cut at the perturbation: the before-eval is this run's final one
+        (out_dir / relative).parent.mkdir(parents=True, exist_ok=True)
+        (out_dir / relative).write_text(json.dumps(evaluation, indent=2) + "\n")
 
 
 def main(argv: list[str] | None = None) -> None:
