@@ -245,3 +245,17 @@ def test_distance_ablations_replay_their_source_runs(script, tmp_path):
     lines = given.stdout.splitlines()
     assert not [l for l in lines if l.startswith("parallax-train")], given.stdout
     assert all(f"{tmp_path}/runs/a {tmp_path}/runs/b --out" in l for l in lines if l.startswith("parallax-replay"))
+
+
+def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_path):
+    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
+    result = subprocess.run(["bash", str(REPO / "launch" / "ablations.sh")], cwd=tmp_path, env=env,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    trained = [l for l in lines if l.startswith("parallax-train -m ")]
+    assert len(trained) == 1 and "coder=coarse\\,fine\\,two_scale" in trained[0]
+    assert trained[0].rstrip().endswith("train.presentations=60")
+    replays = [l for l in lines if l.startswith("parallax-replay ")]
+    assert len(replays) == 3 and all(f"{tmp_path}/reproduce/" in l for l in replays)
+    assert len([l for l in lines if l.startswith("parallax-report ")]) == 3
