@@ -110,14 +110,23 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
             err = np.abs(run["pans"] - run["targets"])
             result["mae_per_position"][mode] = {k: float(v) for k, v in zip(labels, err.mean(axis=0))}
             result["mae"][mode] = float(err.mean())
+        between_run = None
+        if between:
+            between_jobs = [(d, i % n_tex) for i, d in enumerate(between)]
+            between_run = run_jobs(exp, between_jobs, True)
+        # The greedy eye's vectors s, kept whether or not this run's learner is ready, so that
+        # parallax-replay can score other distance learners on exactly these eye movements.
+        result["greedy_samples"] = {
+            "grid": {"pans": runs["greedy"]["pans"].tolist(), "distances": runs["greedy"]["distances"].tolist()}}
+        if between_run is not None:
+            result["greedy_samples"]["between"] = {"pans": between_run["pans"].tolist(),
+                                                   "distances": between_run["distances"].tolist()}
         curves = {}
         if exp.distance.is_ready:
             result["distance"] = distance_results(exp.distance, runs["greedy"]["pans"], runs["greedy"]["distances"])
             pd = result["distance"]["per_distance"]
             curves["grid (held-out textures)"] = ([float(k) for k in pd], list(pd.values()))
-            if between:
-                between_jobs = [(d, i % n_tex) for i, d in enumerate(between)]
-                between_run = run_jobs(exp, between_jobs, True)
+            if between_run is not None:
                 result["distance_between_grid"] = distance_results(exp.distance, between_run["pans"],
                                                                    between_run["distances"])
                 pb = result["distance_between_grid"]["per_distance"]

@@ -639,9 +639,11 @@ def distance_table(selection: PaperSelection, phase: str) -> tuple[str, dict]:
     # One source for every row, so that rows compare like with like: a frozen model on held-out
     # textures is far better than the online error during training (a learner replayed by
     # parallax-replay has only the latter).
+    # Rows with no distance error at all (a queue that never filled) do not count.
     chosen = [g for g in (selection.rows.get(name) for name in published) if g is not None]
-    use_eval = all(_distance_values(g, phase) is not None and _distance_values(g, phase)[1] == EVAL_SOURCE
-                   for g in chosen)
+    with_data = [g for g in chosen if (v := _distance_values(g, phase)) is not None
+                 and any(_total(by_range) is not None for by_range in v[0])]
+    use_eval = all(_distance_values(g, phase)[1] == EVAL_SOURCE for g in with_data)
     for row_name, theirs in published.items():
         group = selection.rows.get(row_name)
         values = _distance_values(group, phase, use_eval) if group is not None else None

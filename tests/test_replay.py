@@ -113,3 +113,13 @@ def test_replayed_learners_are_scored_on_the_evals_eye_movements(perturbed_run, 
     from parallax.report import load_run
 
     assert load_run(written.parent).final_eval() is not None
+
+
+def test_evals_without_a_ready_learner_still_give_their_eye_movements():
+    from parallax.distance.replay import _eval_samples
+
+    kept = {"pans": [[0.1, 0.2]], "distances": [4.0]}
+    assert _eval_samples({"greedy_samples": {"grid": kept, "between": kept}}) == {
+        "distance": kept, "distance_between_grid": kept}
+    assert _eval_samples({"distance": {"by_range": {}, "samples": kept}}) == {"distance": kept}
+    assert _eval_samples({"mae": {}}) == {}

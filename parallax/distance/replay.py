@@ -131,8 +131,9 @@ def _rescore_evals(run_dir: Path, summary: dict, before_learner, final_learner) 
         if not path.is_file():
             continue
         result = json.loads(path.read_text())
-        if "samples" not in (result.get("distance") or {}):
-            continue  # an eval from before the samples were kept, or without a ready learner
+        samples = _eval_samples(result)
+        if not samples:
+            continue  # an eval from before the samples were kept
         at = int(result.get("presentations", -1))
         if result.get("perturbed") or start is None:
             learner = final_learner if at == int(summary["presentations"]) else None
@@ -140,13 +141,20 @@ def _rescore_evals(run_dir: Path, summary: dict, before_learner, final_learner) 
             learner = before_learner if at == start else None
         if learner is None or not learner.is_ready:
             continue
-        for key in ("distance", "distance_between_grid"):
-            if key in result and "samples" in result[key]:
-                samples = result[key]["samples"]
-                result[key] = distance_results(learner, samples["pans"], samples["distances"])
+        for key, kept in samples.items():
+            result[key] = distance_results(learner, kept["pans"], kept["distances"])
         result["replayed_from"] = str(path)
         rescored[str(path.relative_to(run_dir))] = result
     return rescored
+
+
+def _eval_samples(result: dict) -> dict[str, dict]:
+    """eval.json key → the greedy eye's s vectors and distances that eval scored (or would have)."""
+    if "greedy_samples" in result:
+        names = {"grid": "distance", "between": "distance_between_grid"}
+        return {names[k]: v for k, v in result["greedy_samples"].items() if k in names}
+    return {k: result[k]["samples"] for k in ("distance", "distance_between_grid")
+            if "samples" in (result.get(k) or {})}
 
 
 def _cut_at_perturbation(cfg: DictConfig, summary: dict, tracker: DistanceErrorTracker, run_dir: Path,
