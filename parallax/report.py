@@ -559,8 +559,11 @@ def select_paper_groups(groups: Sequence[Group]) -> PaperSelection:
                     columns[(column, position)] = chosen
     rows: dict[str, Group] = {}
     for row, (labels, weighted) in paper.DISTANCE_ROWS.items():
-        chosen = _pick([g for g in groups if tuple(g.lateral_labels) == labels and g.weighting_effective == weighted],
-                       f"Tables 4–5, {row}", notes, prefer_weighting=weighted)
+        fits = [g for g in groups if tuple(g.lateral_labels) == labels and g.weighting_effective == weighted]
+        # a group whose queue never filled has no distance error: prefer one that has
+        measured = [g for g in fits if any(_total(r.online_distance("before")) is not None
+                                           or _total(r.summary.get("distance_error")) is not None for r in g.runs)]
+        chosen = _pick(measured or fits, f"Tables 4–5, {row}", notes, prefer_weighting=weighted)
         if chosen is not None:
             rows[row] = chosen
     return PaperSelection(columns, rows, notes)
