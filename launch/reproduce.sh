@@ -11,7 +11,7 @@
 # σ = 2, training continuing. "5–20 cm without weighting" (Tables 4–5) replays the weighted runs'
 # eye movements through a learner without weighting (parallax-replay; the distance learner
 # never acts on the world, so this is exactly what training it would give).
-# Then parallax-eval of the 5–20 cm models before and after the perturbation (held-out
+# Then parallax-eval of the 5–10 and 5–20 cm models before and after the perturbation (held-out
 # textures, distances between the grid points), their checkpoints copied into
 # docs/results/checkpoints/, and the report (results.json beside it).
 # Extra arguments are Hydra overrides for every training job (they come last, so e.g.
@@ -22,6 +22,7 @@ set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
 sweep="$(px_sweep_dir reproduce)"
 unweighted="$(px_sweep_dir reproduce_unweighted)"
+five_ten_c50="$(px_sweep_dir reproduce_5_10_c50)"
 seeds="seed=${SEEDS:-0,1,2}"
 singles=paper_single_5,paper_single_7,paper_single_10,paper_single_13,paper_single_15,paper_single_20
 status=0
@@ -31,10 +32,10 @@ px_sweep "$sweep" experiment=paper_multi_5_20_weighted "$seeds" train.presentati
   distance.queue_size=100 perturbation.start_fraction=0.6667 "$@" || status=$?
 
 weighted=("$sweep"/*experiment=paper_multi_5_20_weighted*)
-px_run parallax-replay "${weighted[@]}" --out "$unweighted" distance.weighting=false || status=$?
+five_ten=("$sweep"/*experiment=paper_multi_5_10,*)
 
 read -ra eval_args <<< "${EVAL_ARGS:---distances 3.0 3.5 4.0 4.5 5.0 5.5 6.0 6.5 7.0 7.5 8.0 8.5 9.0 9.5 10.0}"
-for run in "${weighted[@]}"; do
+for run in "${weighted[@]}" "${five_ten[@]}"; do
   # evaluate finished runs whose eval.json is missing or older than the checkpoint
   if [[ -n "${PARALLAX_DRY_RUN:-}" || ( -f "$run/summary.json" && ! "$run/eval.json" -nt "$run/checkpoint.pt" ) ]]; then
     px_run parallax-eval "$run" "${eval_args[@]}" || status=$?
@@ -42,6 +43,11 @@ for run in "${weighted[@]}"; do
       --out "$run/eval_before" || status=$?
   fi
 done
+
+px_run parallax-replay "${weighted[@]}" --out "$unweighted" distance.weighting=false || status=$?
+# Table 4's 5–10 cm row: the paper's c = 300 never fills in 200 presentations, so its eye
+# movements are replayed through a learner with c = 50 (scored on the same evals)
+px_run parallax-replay "${five_ten[@]}" --out "$five_ten_c50" distance.queue_size=50 || status=$?
 
 # The small trained models of the 5–20 cm weighted runs, before and after the perturbation, so
 # that anyone can run parallax-eval on them without training: one folder per seed, a run
@@ -61,5 +67,5 @@ if [[ -f "$report_root/notes.md" ]]; then
   notes=(--notes "$report_root/notes.md")
 fi
 px_report "$report_root" README.md "Reproducing the paper: Tables 2–5 and Figs. 7–11" paper \
-  "$sweep" "$unweighted" "${notes[@]}"
+  "$sweep" "$unweighted" "$five_ten_c50" "${notes[@]}"
 exit "$status"
