@@ -674,7 +674,8 @@ def distance_table(selection: PaperSelection, phase: str) -> tuple[str, dict]:
     what = "before the perturbation" if phase == "before" else "after the perturbation"
     lines = [f"**Table {number}** — average distance-estimation error (%) per range of distances, {what}. "
              "Cells: ours mean ± sd over seeds (paper); ✓: ours ≤ paper at two decimals. "
-             f"Source: `{EVAL_SOURCE}` = frozen model on held-out photographs at 3.0, 3.1, …, 10.0 m; "
+             f"Source: `{EVAL_SOURCE}` = frozen model on held-out photographs at the distances parallax-eval "
+             "was given (by default 3.0, 3.1, …, 10.0 m; see the notes for this report's); "
              f"`{ONLINE_SOURCE}` = the trainer's predictions of each new s before learning it "
              "(last 500), used for every row when any row has no matching eval.json.", "",
              md_table(header, rows), "", f"Ours at or below the paper in {met} of {compared} cells."]
