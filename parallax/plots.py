@@ -3,6 +3,7 @@ perturbation starts), MAE per lateral position, and distance error against dista
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Sequence
 
@@ -11,6 +12,12 @@ import matplotlib
 matplotlib.use("Agg")  # headless: figures go to files
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+
+def _set_title(ax, title: str) -> None:
+    """Long titles (a group's settings) wrap instead of running off the figure."""
+    lines = textwrap.wrap(title, 70) or [""]
+    ax.set_title("\n".join(lines), fontsize=10 if len(lines) > 1 else None)
 
 
 def _save(fig, path: Path) -> Path:
@@ -37,7 +44,7 @@ def mae_curves(records: Sequence[dict], path: str | Path, title: str = "Eye-move
     ax.set_xlabel("iterations per robot")
     ax.set_ylabel("MAE (deg)")
     ax.set_yscale("log")
-    ax.set_title(title)
+    _set_title(ax, title)
     ax.legend(fontsize=6, ncol=2)
     return _save(fig, path)
 
@@ -67,7 +74,7 @@ def error_vs_distance(curves: dict[str, tuple[Sequence[float], Sequence[float]]]
         ax.plot(d, err, marker=".", lw=1, label=name)
     ax.set_xlabel("distance (m)")
     ax.set_ylabel("error (%)")
-    ax.set_title(title)
+    _set_title(ax, title)
     ax.legend(fontsize=7)
     return _save(fig, path)
 
@@ -102,7 +109,7 @@ def mean_sd_curves(curves: dict[str, tuple[Sequence[float], Sequence[float], Seq
     ax.set_ylabel(ylabel)
     if log_y:
         ax.set_yscale("log")
-    ax.set_title(title)
+    _set_title(ax, title)
     ax.legend(fontsize=6, ncol=2)
     return _save(fig, path)
 
@@ -129,7 +136,7 @@ def error_vs_distance_with_band(lines: dict[str, tuple[Sequence[float], Sequence
         ax.plot(d, err, ls="none", marker="o", ms=4, color=colours((i + 1) % 10), label=name)
     ax.set_xlabel("distance (m)")
     ax.set_ylabel("error (%)")
-    ax.set_title(title)
+    _set_title(ax, title)
     ax.legend(fontsize=6)
     return _save(fig, path)
 
