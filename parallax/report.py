@@ -264,7 +264,7 @@ def _progress(path: Path, total: int | None) -> str:
     return f"{done}{of} presentations logged{checkpoint}"
 
 
-def _eval_files(path: Path) -> list[Path]:
+def eval_files(path: Path) -> list[Path]:
     """eval.json in the run directory and one level below (parallax-eval --out RUN/SUBDIR)."""
     files = [path / EVAL_NAME] if (path / EVAL_NAME).is_file() else []
     for sub in sorted(p for p in path.iterdir() if p.is_dir() and not p.name.startswith(".") and p.name != "tb"):
@@ -307,7 +307,7 @@ def load_run(path: Path) -> Run:
         run.problem = f"unfinished: {SUMMARY_NAME} covers {done} of {total} presentations"
         run.summary = None
         return run
-    for eval_path in _eval_files(path):
+    for eval_path in eval_files(path):
         try:
             result = _load_json(eval_path)
         except json.JSONDecodeError:
@@ -797,7 +797,7 @@ class Curves:
     perturbation_at: float | None
 
 
-def _read_metrics(path: Path) -> list[dict]:
+def read_metrics(path: Path) -> list[dict]:
     """metrics.jsonl's records; a torn last line (a run killed while writing) is skipped."""
     metrics = path / METRICS_NAME
     if not metrics.is_file():
@@ -813,7 +813,7 @@ def _read_metrics(path: Path) -> list[dict]:
 
 def group_curves(group: Group) -> Curves | None:
     """Mean and sd over seeds of the sliding-window MAE, aligned by presentation."""
-    records = [rec for rec in (_read_metrics(r.path) for r in group.runs) if rec]
+    records = [rec for rec in (read_metrics(r.path) for r in group.runs) if rec]
     if not records:
         return None
     length = min(len(r) for r in records)

@@ -33,9 +33,8 @@ from omegaconf import DictConfig, OmegaConf
 from parallax.config import RUN_CONFIG_NAME, load_run_config, run_name
 from parallax.experiment import seeds_for
 from parallax.metrics import DistanceErrorTracker, learn_online
+from parallax.report import METRICS_NAME, SUMMARY_NAME, ReportError, eval_files, find_run_dirs, read_metrics
 
-METRICS_NAME = "metrics.jsonl"
-SUMMARY_NAME = "summary.json"
 
 
 class ReplayError(ValueError):
@@ -56,18 +55,12 @@ def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
     return [list(combo) for combo in itertools.product(*axes)] if axes else [[]]
 
 
-def _read_stream(path: Path) -> list[dict]:
-    records = []
-    for number, line in enumerate(path.read_text().splitlines(), 1):
-        if not line.strip():
-            continue
-        try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
-            break  # a line torn by a hard kill ends the usable stream, as on resume
-        if "pans" not in records[-1]:
-            raise ReplayError(f"{path} line {number} has no eye-movement vectors: the run predates "
-                              "parallax-replay (logging of s); train it again to replay it")
+def _read_stream(run_dir: Path) -> list[dict]:
+    """The run's metrics.jsonl records, which must carry the eye-movement vectors s."""
+    records = read_metrics(run_dir)
+    if records and "pans" not in records[0]:
+        raise ReplayError(f"{run_dir / METRICS_NAME} has no eye-movement vectors: the run predates "
+                          "parallax-replay (logging of s); train it again to replay it")
     return records
 
 
@@ -94,7 +87,7 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbatio
                           seed=seeds_for(int(cfg.seed), robots + 3)[robots + 2])
     tracker = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
     before = before_learner = None
-    records = _read_stream(run_dir / METRICS_NAME)
+    records = _read_stream(run_dir)
     if len(records) < int(summary["presentations"]):
         raise ReplayError(f"{run_dir / METRICS_NAME} has {len(records)} presentations, the summary "
                           f"{summary['presentations']}: the log is incomplete")
@@ -127,9 +120,7 @@ def _rescore_evals(run_dir: Path, summary: dict, before_learner, final_learner) 
 
     rescored = {}
     start = (summary.get("before_perturbation") or {}).get("presentations")
-    for path in [run_dir / "eval.json", *sorted(run_dir.glob("*/eval.json"))]:
-        if not path.is_file():
-            continue
+    for path in eval_files(run_dir):
         result = json.loads(path.read_text())
         samples = _eval_samples(result)
         if not samples:
@@ -176,8 +167,10 @@ def find_sources(paths: Iterable[str | Path]) -> list[Path]:
     for path in map(Path, paths):
         if not path.is_dir():
             raise ReplayError(f"{path} is not a directory (give a run or multirun directory)")
-        runs = sorted(p.parent for p in path.rglob(RUN_CONFIG_NAME)
-                      if (p.parent / SUMMARY_NAME).is_file() and ".hydra" not in p.parts)
+        try:
+            runs = [run for run in find_run_dirs(path) if (run / SUMMARY_NAME).is_file()]
+        except ReportError:
+            runs = []
         if not runs:
             raise ReplayError(f"{path} holds no finished run ({RUN_CONFIG_NAME} with {SUMMARY_NAME})")
         found += runs
