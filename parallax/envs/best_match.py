@@ -3,8 +3,8 @@
 The pursuit policy is rewarded for pans that make I(t) easy to encode together with I0. If the
 pixels themselves matched best away from the target pan α* (for instance because the still
 background, which has a smaller parallax than the panel, filled part of a window), no learner
-could reach the paper's MAE. This module renders each scale's window (grey, pyramid-subsampled
-as in `parallax.coding.retina`) over a sweep of pans around α* and reports the pan of the
+could reach the paper's MAE. This module renders each scale's window (grey and pyramid-subsampled
+by `parallax.coding.retina`, the coder's configured scales) over a sweep of pans around α* and reports the pan of the
 smallest mean squared difference from I0, relative to α*.
 
     python -m parallax.envs.best_match [--distances 3 6.5 10] [--lateral 0.2] [--textures 6]
@@ -14,25 +14,24 @@ from __future__ import annotations
 
 import argparse
 
-import cv2
 import numpy as np
 
 import parallax.envs
+from parallax.coding.retina import ScaleSpec, as_gray_batch, centre_window, pyramid_down
+from parallax.config import compose
 
-#: (window px, subsample) of the paper's coarse and fine scales (conf/coder/two_scale.yaml).
-WINDOWS = {"coarse": (250, 8), "fine": (150, 2)}
+
+def scale_specs() -> dict[str, ScaleSpec]:
+    """The coder's scales as configured (conf/coder/two_scale.yaml)."""
+    specs = compose().coder.scale_specs
+    return {name: ScaleSpec.from_mapping(name, spec) for name, spec in specs.items()}
 
 
-def window(image: np.ndarray, side: int, subsample: int) -> np.ndarray:
-    """The central side×side grey window, pyrDown'ed to 1/subsample."""
-    gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY).astype(np.float32)
-    top = (gray.shape[0] - side) // 2
-    left = (gray.shape[1] - side) // 2
-    gray = gray[top:top + side, left:left + side]
-    while subsample > 1:
-        gray = cv2.pyrDown(gray)
-        subsample //= 2
-    return gray
+def window(image: np.ndarray, spec: ScaleSpec) -> np.ndarray:
+    """The scale's central window of an RGB eye image, grey and pyramid-subsampled as the retina does."""
+    # a copy: the task hands out I0 read-only, and torch warns about wrapping such arrays
+    gray = centre_window(as_gray_batch(image[None].copy()), spec.window)
+    return pyramid_down(gray, spec.pyramid_levels)[0].numpy()
 
 
 def best_match_offsets(distance: float, lateral: float, textures: int, span_deg: float = 1.0,
@@ -40,7 +39,8 @@ def best_match_offsets(distance: float, lateral: float, textures: int, span_deg:
     """scale → per texture, argmin over pans of MSE(window(I(pan)), window(I0)) minus α*, degrees."""
     env = parallax.envs.load(seed=seed, lateral_positions=[lateral], trial_length=30)
     physics = env.physics
-    offsets: dict[str, list[float]] = {name: [] for name in WINDOWS}
+    specs = scale_specs()
+    offsets: dict[str, list[float]] = {name: [] for name in specs}
     try:
         for texture in range(textures):
             env.task.set_next_stimulus(texture_index=texture, distance=distance)
@@ -52,9 +52,9 @@ def best_match_offsets(distance: float, lateral: float, textures: int, span_deg:
             for pan in pans:
                 physics.set_pan_deg(float(pan))
                 frames.append(physics.render_left_eye())
-            for name, (side, subsample) in WINDOWS.items():
-                ref = window(reference, side, subsample)
-                errors = [float(np.mean((window(f, side, subsample) - ref) ** 2)) for f in frames]
+            for name, spec in specs.items():
+                ref = window(reference, spec)
+                errors = [float(np.mean((window(f, spec) - ref) ** 2)) for f in frames]
                 offsets[name].append(float(pans[int(np.argmin(errors))] - target))
     finally:
         env.close()
