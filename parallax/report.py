@@ -643,10 +643,9 @@ def distance_table(selection: PaperSelection, phase: str) -> tuple[str, dict]:
     # textures is far better than the online error during training (a learner replayed by
     # parallax-replay has only the latter).
     # Rows with no distance error at all (a queue that never filled) do not count.
-    chosen = [g for g in (selection.rows.get(name) for name in published) if g is not None]
-    with_data = [g for g in chosen if (v := _distance_values(g, phase)) is not None
-                 and any(_total(by_range) is not None for by_range in v[0])]
-    use_eval = all(_distance_values(g, phase)[1] == EVAL_SOURCE for g in with_data)
+    found = [v for v in (_distance_values(g, phase) for g in selection.rows.values()) if v is not None]
+    use_eval = all(source == EVAL_SOURCE for per_seed, source in found
+                   if any(_total(by_range) is not None for by_range in per_seed))
     for row_name, theirs in published.items():
         group = selection.rows.get(row_name)
         values = _distance_values(group, phase, use_eval) if group is not None else None
