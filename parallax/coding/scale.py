@@ -18,7 +18,12 @@ from .dictionary import gradient_step_, pooled_activity, random_dictionary, reco
 from .pursuit import SparseCode, gram_matrix, matching_pursuit, matching_pursuit_recompute
 from .retina import ScaleSpec, prepare_reference, scale_patches, stack_pair
 
-PURSUITS = ("gram", "recompute")
+#: "gram": the Gram-form pursuit, on the CPU in the compiled kernel when it can be built (see
+#: ``PARALLAX_PURSUIT_KERNEL`` in :mod:`parallax.coding.native`); "gram_cpp" and "gram_torch"
+#: force the kernel or the numpy/torch loop (same results); "recompute": correlations recomputed
+#: from the residual at every step.
+PURSUITS = ("gram", "gram_cpp", "gram_torch", "recompute")
+_KERNELS = {"gram": None, "gram_cpp": "cpp", "gram_torch": "torch"}
 
 
 @dataclass
@@ -80,9 +85,10 @@ class ScaleCoder(nn.Module):
 
     def encode(self, patches: torch.Tensor) -> SparseCode:
         """Matching pursuit (eq. 1) of (M, K) patches on the current dictionary."""
-        if self.pursuit == "gram":
-            return matching_pursuit(patches, self.dictionary, self.sparsity, self.gram())
-        return matching_pursuit_recompute(patches, self.dictionary, self.sparsity)
+        if self.pursuit == "recompute":
+            return matching_pursuit_recompute(patches, self.dictionary, self.sparsity)
+        return matching_pursuit(patches, self.dictionary, self.sparsity, self.gram(),
+                                kernel=_KERNELS[self.pursuit])
 
     @torch.no_grad()
     def learn_from(self, code: SparseCode) -> None:
