@@ -186,6 +186,21 @@ def test_recompute_pursuit_gives_the_same_outputs() -> None:
                                straightforward(_photo_batch(1, shift=2)).reward, atol=1e-4, rtol=0)
 
 
+def test_compiled_and_torch_pursuit_loops_learn_bit_identical_dictionaries() -> None:
+    from parallax.coding import native
+
+    if native.fused_pursuit_kernel() is None:
+        pytest.skip(f"the fused pursuit kernel is unavailable: {native.kernel_failure()}")
+    coders = [_coder(scales=["coarse", "fine"], pursuit=pursuit) for pursuit in ("gram_cpp", "gram_torch")]
+    for coder in coders:
+        coder.set_reference(_photo_batch(2))
+    for shift in (1, 3, 5):
+        compiled, loop = (coder(_photo_batch(2, shift=shift)) for coder in coders)
+        assert torch.equal(compiled.state, loop.state) and torch.equal(compiled.reward, loop.reward)
+    for name in ("coarse", "fine"):
+        assert torch.equal(coders[0].dictionaries[name], coders[1].dictionaries[name])
+
+
 @pytest.mark.parametrize(("overrides", "message"), [
     ({"image_size": 200}, r"scale_specs\.coarse\.window=250"),
     ({"scales": []}, "non-empty"),

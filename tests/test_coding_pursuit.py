@@ -8,7 +8,8 @@ import torch
 from sklearn.linear_model import orthogonal_mp
 
 from parallax.coding.dictionary import random_dictionary
-from parallax.coding.pursuit import dense_codes, matching_pursuit, matching_pursuit_recompute
+from parallax.coding.pursuit import dense_codes, gram_matrix, matching_pursuit, matching_pursuit_recompute
+from parallax.coding.retina import stack_pair
 
 K, N, SPARSITY = 200, 288, 10
 
@@ -131,3 +132,159 @@ def test_cpu_and_device_agnostic_steps_agree() -> None:
     picks_any, coefficients_any = _gram_steps(correlations.clone(), gram, SPARSITY)
     assert torch.equal(picks_cpu, picks_any)
     torch.testing.assert_close(coefficients_cpu, coefficients_any)
+
+
+# --- the compiled kernel (pursuit_kernel.cpp) against the numpy/torch loop -----------------------
+
+def _compiler_missing() -> str | None:
+    """Why the kernel cannot be built here at all (no C++ compiler or no ninja), else None."""
+    import shutil
+
+    from torch.utils import cpp_extension
+
+    if not any(shutil.which(name) for name in ("c++", "g++", "clang++")):
+        return "no C++ compiler on this machine"
+    if not cpp_extension.is_ninja_available():
+        return "the ninja package is not installed"
+    return None
+
+
+@pytest.fixture(scope="module")
+def fused():
+    """The compiled kernel; the first build of a fresh cache takes ~15 s, once."""
+    from parallax.coding import native
+
+    missing = _compiler_missing()
+    if missing:
+        pytest.skip(f"the fused pursuit kernel cannot be built: {missing}")
+    kernel = native.fused_pursuit_kernel()
+    assert kernel is not None, f"the kernel failed to build or disagreed: {native.kernel_failure()}"
+    return kernel
+
+
+def _both_steps(fused, correlations: torch.Tensor, gram: torch.Tensor, sparsity: int):
+    from parallax.coding.pursuit import _gram_steps_cpu
+
+    expected = _gram_steps_cpu(correlations.clone(), gram, sparsity)
+    updated = correlations.clone()
+    got = fused(updated, gram, sparsity)
+    return expected, got
+
+
+def _realistic_patches(dtype: torch.dtype) -> torch.Tensor:
+    """Normalised [I0 ; I(t)] patch pairs of a photograph at the coarse scale, as the coder makes."""
+    import skimage.data
+
+    from parallax.coding.retina import ScaleSpec, as_gray_batch, prepare_reference, scale_patches
+
+    spec = ScaleSpec(window=250, subsample=8, patch=10, stride=1)
+    photo = skimage.data.astronaut()
+    reference = as_gray_batch(photo[None, 100:356, 100:356])
+    current = as_gray_batch(photo[None, 100:356, 96:352])
+    pairs = stack_pair(prepare_reference(scale_patches(reference, spec), "per_half"),
+                       scale_patches(current, spec), "per_half")
+    return pairs.reshape(-1, spec.dim).to(dtype)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("atoms", [N, 37, 5])   # whole vector lanes, a tail, only a tail
+def test_fused_kernel_is_bit_identical_to_the_torch_loop_on_random_data(fused, dtype, atoms) -> None:
+    dictionary = _unit_rows(atoms, K, seed=20, dtype=dtype)
+    correlations = _unit_rows(200, K, seed=21, dtype=dtype) @ dictionary.T
+    (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(
+        fused, correlations, gram_matrix(dictionary), SPARSITY)
+    assert fused_picks.dtype == torch.int64 and fused_coefficients.dtype == dtype
+    assert torch.equal(fused_picks, picks)
+    assert torch.equal(fused_coefficients, coefficients)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_fused_kernel_is_bit_identical_on_normalised_photo_patches(fused, dtype) -> None:
+    patches = _realistic_patches(dtype)
+    assert patches.shape == (529, K)
+    dictionary = random_dictionary(N, K, torch.Generator().manual_seed(22), dtype=dtype)
+    code_torch = matching_pursuit(patches, dictionary, SPARSITY, kernel="torch")
+    code_fused = matching_pursuit(patches, dictionary, SPARSITY, kernel="cpp")
+    for field in ("atom_indices", "coefficients", "codes", "residuals"):
+        assert torch.equal(getattr(code_fused, field), getattr(code_torch, field)), field
+    recomputed = matching_pursuit_recompute(patches, dictionary, SPARSITY)
+    same_picks = (code_fused.atom_indices == recomputed.atom_indices).all(dim=1)
+    assert same_picks.float().mean() > (0.97 if dtype == torch.float32 else 0.999)
+    torch.testing.assert_close(code_fused.coefficients[same_picks], recomputed.coefficients[same_picks],
+                               rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_fused_kernel_breaks_ties_like_numpy_argmax(fused, dtype) -> None:
+    # Every atom twice (rows 2i and 2i+1 equal): every correlation is tied with its twin, and
+    # the first of the two must win, as numpy's argmax (and torch's) pick it.
+    atoms = _unit_rows(N // 2, K, seed=23, dtype=dtype)
+    dictionary = atoms.repeat_interleave(2, dim=0)
+    correlations = _unit_rows(100, K, seed=24, dtype=dtype) @ dictionary.T
+    (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(
+        fused, correlations, gram_matrix(dictionary), SPARSITY)
+    assert torch.equal(fused_picks, picks) and torch.equal(fused_coefficients, coefficients)
+    assert (picks[:, 0] % 2 == 0).all()
+    # ±equal magnitudes, zero rows, a NaN and an infinity: numpy's argmax of |c| decides.
+    values = torch.tensor([0.5, -0.5, 0.25], dtype=dtype)
+    special = values[torch.randint(0, 3, (40, N), generator=torch.Generator().manual_seed(25))]
+    special[1] = 0
+    special[2, 100] = float("nan")
+    special[3, 7] = float("-inf")
+    special[4, N - 1] = 0.75          # the maximum in the tail after the last whole lane
+    gram = torch.eye(N, dtype=dtype)
+    (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(fused, special, gram, 3)
+    assert torch.equal(fused_picks, picks)
+    torch.testing.assert_close(fused_coefficients, coefficients, equal_nan=True, rtol=0, atol=0)
+    assert fused_picks[1].tolist() == [0, 0, 0] and fused_picks[2, 0] == 100 and fused_picks[4, 0] == N - 1
+
+
+def test_fused_kernel_refuses_bad_arguments(fused) -> None:
+    gram = torch.eye(8)
+    with pytest.raises(RuntimeError, match="dtype"):
+        fused(torch.zeros(3, 8, dtype=torch.float64), gram, 2)
+    with pytest.raises(RuntimeError, match=r"\(M, N\)"):
+        fused(torch.zeros(3, 7), gram, 2)
+    with pytest.raises(RuntimeError, match="sparsity"):
+        fused(torch.zeros(3, 8), gram, 0)
+
+
+def test_the_pursuit_kernel_choice_follows_the_argument_and_the_environment(monkeypatch) -> None:
+    from parallax.coding import native
+    from parallax.coding.pursuit import _cpu_steps, _gram_steps_cpu
+
+    monkeypatch.setenv(native.KERNEL_ENV, "torch")
+    assert _cpu_steps(None) is _gram_steps_cpu
+    monkeypatch.setenv(native.KERNEL_ENV, "fortran")
+    with pytest.raises(ValueError, match="PARALLAX_PURSUIT_KERNEL"):
+        matching_pursuit(torch.zeros(2, K), random_dictionary(N, K, torch.Generator()), SPARSITY)
+    with pytest.raises(ValueError, match="kernel"):
+        matching_pursuit(torch.zeros(2, K), random_dictionary(N, K, torch.Generator()), SPARSITY,
+                         kernel="fortran")
+
+
+def test_without_the_kernel_the_pursuit_falls_back_with_one_warning(monkeypatch, caplog) -> None:
+    from parallax.coding import native
+    from parallax.coding.pursuit import _cpu_steps, _gram_steps_cpu
+
+    def no_compiler():
+        raise RuntimeError("no C++ compiler (simulated)")
+
+    monkeypatch.setattr(native, "_build", no_compiler)
+    monkeypatch.setattr(native, "_loaded", False)
+    monkeypatch.setattr(native, "_kernel", None)
+    monkeypatch.setattr(native, "_failure", None)
+    monkeypatch.delenv(native.KERNEL_ENV, raising=False)
+    dictionary = random_dictionary(N, K, torch.Generator().manual_seed(26))
+    patches = _unit_rows(50, K, seed=27, dtype=torch.float32)
+    with caplog.at_level("WARNING", logger=native.__name__):
+        fallback = matching_pursuit(patches, dictionary, SPARSITY)
+        again = matching_pursuit(patches, dictionary, SPARSITY)
+    warnings = [record for record in caplog.records if record.name == native.__name__]
+    assert len(warnings) == 1 and "simulated" in warnings[0].getMessage()
+    assert _cpu_steps("auto") is _gram_steps_cpu
+    reference = matching_pursuit(patches, dictionary, SPARSITY, kernel="torch")
+    assert torch.equal(fallback.atom_indices, reference.atom_indices)
+    assert torch.equal(again.codes, reference.codes)
+    with pytest.raises(RuntimeError, match="simulated"):
+        matching_pursuit(patches, dictionary, SPARSITY, kernel="cpp")
