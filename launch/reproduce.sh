@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # Issue 8 — the paper's experiments (§4.2, §5, §6), three seeds each (the paper's three
 # simulations), with the budgets of the committed report docs/results/README.md (a 2-core CPU,
-# about 2 hours with both cores busy):
+# about 1.5 hours with both cores busy):
 #   single lateral positions 5, 7, 10, 13, 15, 20 cm     400 presentations (12 000 iterations)
 #   multiple positions 5–10 cm                            200 presentations (36 000 iterations)
-#   multiple positions 5–20 cm with weighting             300 presentations (144 000 iterations),
+#   multiple positions 5–20 cm with weighting             200 presentations (96 000 iterations),
 #                                                         queue c = 100
 # In every run the last third (the last half for the single and 5–10 cm runs, as in
 # conf/perturbation/rotate_blur.yaml) is §5's robustness test: left camera rotated 15°, blur
@@ -28,7 +28,7 @@ singles=paper_single_5,paper_single_7,paper_single_10,paper_single_13,paper_sing
 status=0
 px_sweep "$sweep" "experiment=$singles" "$seeds" train.presentations=400 "$@" || status=$?
 px_sweep "$sweep" experiment=paper_multi_5_10 "$seeds" train.presentations=200 "$@" || status=$?
-px_sweep "$sweep" experiment=paper_multi_5_20_weighted "$seeds" train.presentations=300 \
+px_sweep "$sweep" experiment=paper_multi_5_20_weighted "$seeds" train.presentations=200 \
   distance.queue_size=100 perturbation.start_fraction=0.6667 "$@" || status=$?
 
 weighted=("$sweep"/*experiment=paper_multi_5_20_weighted*)

@@ -1,0 +1,108 @@
+"""`python -m parallax.landscape RUN`: the reward of eq. (6) around the target pan α*, and the
+policy's mean pan step there, for a trained run (paper §3.3–3.4).
+
+The pursuit can only be as good as the reward it climbs: the eye settles where −(eC + eF) peaks.
+For a few (texture, distance) pairs at one lateral position this sweeps the pan from α* − span to
+α* + span with the run's frozen dictionaries and policy, and prints per offset the mean reward,
+the mean error of each scale and the policy's expected pan step E_π[a]; then the offset where
+each stimulus's reward peaks. A peak away from 0 means the learnt dictionaries favour a
+disparity other than zero (TUNING.md: a fast-adapting dictionary made it peak 0.35° short of α*).
+Nothing is learnt; the run directory is only read.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from parallax import checkpoint
+from parallax.config import load_run_config
+from parallax.experiment import Experiment
+
+
+def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME,
+          lateral_position: float | None = None, distances=(3.0, 5.0, 7.0, 10.0), textures: int = 4,
+          span: float = 1.0, step: float = 0.05) -> dict:
+    """Rewards (stimuli × offsets), per-scale errors and E_π[a] around α*; see the module doc."""
+    run_dir = Path(run_dir)
+    cfg = load_run_config(run_dir)
+    exp = Experiment(cfg)
+    try:
+        exp.load_state_dict(checkpoint.load(run_dir / checkpoint_name)["experiment"])
+        exp.coder.eval()
+        exp.policy.eval()
+        lateral = exp.lateral_positions[0] if lateral_position is None else float(lateral_position)
+        offsets = np.round(np.arange(-span, span + step / 2, step), 6)
+        actions = exp.policy.action_values.cpu().numpy()
+        env, physics = exp.envs[0], exp.envs[0].physics
+        rewards, errors, mean_steps = [], [], []
+        for distance in distances:
+            for texture in range(textures):
+                env.task.set_next_stimulus(texture_index=texture, distance=float(distance))
+                env.reset()
+                exp.coder.set_reference(torch.from_numpy(env.task._reference[None].copy()))
+                physics.set_lateral_position(lateral)
+                target = physics.target_pan_deg()
+                row_r, row_e, row_a = [], [], []
+                for offset in offsets:
+                    physics.set_pan_deg(target + offset)
+                    image = torch.from_numpy(physics.render_left_eye()[None].copy())
+                    out = exp.coder(image, learn=False)
+                    row_r.append(float(out.reward[0]))
+                    row_e.append([float(e[0]) for e in out.errors.values()])
+                    row_a.append(float(exp.policy.probabilities(out.state)[0].cpu().numpy() @ actions))
+                rewards.append(row_r)
+                errors.append(row_e)
+                mean_steps.append(row_a)
+        scales = list(exp.coder.dictionaries)
+    finally:
+        exp.close()
+    rewards_arr = np.asarray(rewards)
+    return {"run_dir": str(run_dir), "checkpoint": checkpoint_name, "lateral_position_m": lateral,
+            "offsets_deg": offsets.tolist(), "scales": scales,
+            "reward": rewards_arr.mean(axis=0).tolist(),
+            "errors": {s: np.asarray(errors)[:, :, i].mean(axis=0).tolist() for i, s in enumerate(scales)},
+            "mean_step_deg": np.asarray(mean_steps).mean(axis=0).tolist(),
+            "peak_offsets_deg": offsets[rewards_arr.argmax(axis=1)].tolist()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m parallax.landscape", description=__doc__.split("\n\n")[0])
+    parser.add_argument("run_dir")
+    parser.add_argument("--checkpoint", default=checkpoint.CHECKPOINT_NAME)
+    parser.add_argument("--lateral", type=float, default=None,
+                        help="lateral position in metres (default: the run's first)")
+    parser.add_argument("--distances", type=float, nargs="+", default=[3.0, 5.0, 7.0, 10.0])
+    parser.add_argument("--textures", type=int, default=4, help="training textures per distance")
+    parser.add_argument("--span", type=float, default=1.0, help="largest |pan − α*|, degrees")
+    parser.add_argument("--json", help="also write the result here")
+    args = parser.parse_args(argv)
+    if not (Path(args.run_dir) / args.checkpoint).is_file():
+        print(f"[landscape] {args.run_dir} has no {args.checkpoint}", file=sys.stderr)
+        return 2
+    if args.textures < 1 or args.span <= 0:
+        print(f"[landscape] --textures must be ≥ 1 and --span > 0, got {args.textures} and {args.span}",
+              file=sys.stderr)
+        return 2
+    torch.set_num_threads(1)
+    result = sweep(args.run_dir, args.checkpoint, args.lateral, args.distances, args.textures, args.span)
+    header = "offset °   reward  " + "  ".join(f"e_{s:<6}" for s in result["scales"]) + "  E[step] °"
+    print(header)
+    for i, offset in enumerate(result["offsets_deg"]):
+        errs = "  ".join(f"{result['errors'][s][i]:.4f}  " for s in result["scales"])
+        print(f"{offset:+7.2f}  {result['reward'][i]:8.4f}  {errs}  {result['mean_step_deg'][i]:+.3f}")
+    peaks = np.asarray(result["peak_offsets_deg"])
+    print(f"reward peak − α* per stimulus: median {np.median(peaks):+.2f}°, "
+          f"range {peaks.min():+.2f}…{peaks.max():+.2f}° ({len(peaks)} stimuli)")
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
