@@ -189,7 +189,7 @@ def test_recompute_pursuit_gives_the_same_outputs() -> None:
 def test_compiled_and_torch_pursuit_loops_learn_bit_identical_dictionaries() -> None:
     from parallax.coding import native
 
-    if native.fused_pursuit_kernel() is None:
+    if native.load_kernels() is None:
         pytest.skip(f"the fused pursuit kernel is unavailable: {native.kernel_failure()}")
     coders = [_coder(scales=["coarse", "fine"], pursuit=pursuit) for pursuit in ("gram_cpp", "gram_torch")]
     for coder in coders:

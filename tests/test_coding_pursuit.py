@@ -150,24 +150,23 @@ def _compiler_missing() -> str | None:
 
 
 @pytest.fixture(scope="module")
-def fused():
-    """The compiled kernel; the first build of a fresh cache takes ~15 s, once."""
+def compiled():
+    """The compiled kernels; the first build of a fresh cache takes ~15 s, once."""
     from parallax.coding import native
 
     missing = _compiler_missing()
     if missing:
-        pytest.skip(f"the fused pursuit kernel cannot be built: {missing}")
-    kernel = native.fused_pursuit_kernel()
-    assert kernel is not None, f"the kernel failed to build or disagreed: {native.kernel_failure()}"
-    return kernel
+        pytest.skip(f"the compiled pursuit kernels cannot be built: {missing}")
+    module = native.load_kernels()
+    assert module is not None, f"the kernels failed to build or disagreed: {native.kernel_failure()}"
+    return module
 
 
-def _both_steps(fused, correlations: torch.Tensor, gram: torch.Tensor, sparsity: int):
+def _both_steps(compiled, correlations: torch.Tensor, gram: torch.Tensor, sparsity: int):
     from parallax.coding.pursuit import _gram_steps_cpu
 
     expected = _gram_steps_cpu(correlations.clone(), gram, sparsity)
-    updated = correlations.clone()
-    got = fused(updated, gram, sparsity)
+    got = compiled.gram_pursuit(correlations.clone(), gram, sparsity)
     return expected, got
 
 
@@ -188,18 +187,18 @@ def _realistic_patches(dtype: torch.dtype) -> torch.Tensor:
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("atoms", [N, 37, 5])   # whole vector lanes, a tail, only a tail
-def test_fused_kernel_is_bit_identical_to_the_torch_loop_on_random_data(fused, dtype, atoms) -> None:
+def test_fused_kernel_is_bit_identical_to_the_torch_loop_on_random_data(compiled, dtype, atoms) -> None:
     dictionary = _unit_rows(atoms, K, seed=20, dtype=dtype)
     correlations = _unit_rows(200, K, seed=21, dtype=dtype) @ dictionary.T
     (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(
-        fused, correlations, gram_matrix(dictionary), SPARSITY)
+        compiled, correlations, gram_matrix(dictionary), SPARSITY)
     assert fused_picks.dtype == torch.int64 and fused_coefficients.dtype == dtype
     assert torch.equal(fused_picks, picks)
     assert torch.equal(fused_coefficients, coefficients)
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_fused_kernel_is_bit_identical_on_normalised_photo_patches(fused, dtype) -> None:
+def test_fused_kernel_is_bit_identical_on_normalised_photo_patches(compiled, dtype) -> None:
     patches = _realistic_patches(dtype)
     assert patches.shape == (529, K)
     dictionary = random_dictionary(N, K, torch.Generator().manual_seed(22), dtype=dtype)
@@ -215,14 +214,14 @@ def test_fused_kernel_is_bit_identical_on_normalised_photo_patches(fused, dtype)
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_fused_kernel_breaks_ties_like_numpy_argmax(fused, dtype) -> None:
+def test_fused_kernel_breaks_ties_like_numpy_argmax(compiled, dtype) -> None:
     # Every atom twice (rows 2i and 2i+1 equal): every correlation is tied with its twin, and
     # the first of the two must win, as numpy's argmax (and torch's) pick it.
     atoms = _unit_rows(N // 2, K, seed=23, dtype=dtype)
     dictionary = atoms.repeat_interleave(2, dim=0)
     correlations = _unit_rows(100, K, seed=24, dtype=dtype) @ dictionary.T
     (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(
-        fused, correlations, gram_matrix(dictionary), SPARSITY)
+        compiled, correlations, gram_matrix(dictionary), SPARSITY)
     assert torch.equal(fused_picks, picks) and torch.equal(fused_coefficients, coefficients)
     assert (picks[:, 0] % 2 == 0).all()
     # ±equal magnitudes, zero rows, a NaN and an infinity: numpy's argmax of |c| decides.
@@ -233,28 +232,54 @@ def test_fused_kernel_breaks_ties_like_numpy_argmax(fused, dtype) -> None:
     special[3, 7] = float("-inf")
     special[4, N - 1] = 0.75          # the maximum in the tail after the last whole lane
     gram = torch.eye(N, dtype=dtype)
-    (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(fused, special, gram, 3)
+    (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(compiled, special, gram, 3)
     assert torch.equal(fused_picks, picks)
     torch.testing.assert_close(fused_coefficients, coefficients, equal_nan=True, rtol=0, atol=0)
     assert fused_picks[1].tolist() == [0, 0, 0] and fused_picks[2, 0] == 100 and fused_picks[4, 0] == N - 1
 
 
-def test_fused_kernel_refuses_bad_arguments(fused) -> None:
+def test_fused_kernels_refuse_bad_arguments(compiled) -> None:
     gram = torch.eye(8)
     with pytest.raises(RuntimeError, match="dtype"):
-        fused(torch.zeros(3, 8, dtype=torch.float64), gram, 2)
+        compiled.gram_pursuit(torch.zeros(3, 8, dtype=torch.float64), gram, 2)
     with pytest.raises(RuntimeError, match=r"\(M, N\)"):
-        fused(torch.zeros(3, 7), gram, 2)
+        compiled.gram_pursuit(torch.zeros(3, 7), gram, 2)
     with pytest.raises(RuntimeError, match="sparsity"):
-        fused(torch.zeros(3, 8), gram, 0)
+        compiled.gram_pursuit(torch.zeros(3, 8), gram, 0)
+    with pytest.raises(RuntimeError, match="contiguous"):
+        compiled.gram_pursuit(torch.zeros(8, 3).T, gram, 2)
+    picks, coefficients = torch.tensor([[0, 8]]), torch.ones(1, 2)
+    with pytest.raises(RuntimeError, match="pick 8"):
+        compiled.codes_and_residuals(torch.zeros(1, 5), torch.zeros(8, 5), picks, coefficients)
+    with pytest.raises(RuntimeError, match="pick 8"):
+        compiled.codes_times_residuals(picks, coefficients, torch.zeros(1, 5), 8)
 
 
-def test_the_pursuit_kernel_choice_follows_the_argument_and_the_environment(monkeypatch) -> None:
+def test_fused_kernels_give_the_torch_codes_residuals_and_gradient_bit_for_bit(compiled) -> None:
+    from parallax.coding.dictionary import codes_times_residuals, gradient_step_
+
+    for dtype in (torch.float32, torch.float64):
+        dictionary = random_dictionary(N, K, torch.Generator().manual_seed(28), dtype=dtype)
+        patches = torch.cat([_realistic_patches(dtype), torch.zeros(3, K, dtype=dtype)])
+        codes = {kernel: matching_pursuit(patches, dictionary, SPARSITY, kernel=kernel)
+                 for kernel in ("torch", "cpp")}
+        for field in ("atom_indices", "coefficients", "codes", "residuals"):
+            assert torch.equal(getattr(codes["cpp"], field), getattr(codes["torch"], field)), field
+        products = [codes_times_residuals(codes["torch"], N, kernel=kernel) for kernel in ("torch", "cpp")]
+        assert torch.equal(products[0], products[1])
+        stepped = []
+        for kernel in ("torch", "cpp"):
+            copy = dictionary.clone()
+            gradient_step_(copy, codes["torch"], 0.2, kernel=kernel)
+            stepped.append(copy)
+        assert torch.equal(stepped[0], stepped[1]) and not torch.equal(stepped[0], dictionary)
+
+
+def test_the_kernel_choice_follows_the_argument_and_the_environment(monkeypatch) -> None:
     from parallax.coding import native
-    from parallax.coding.pursuit import _cpu_steps, _gram_steps_cpu
 
     monkeypatch.setenv(native.KERNEL_ENV, "torch")
-    assert _cpu_steps(None) is _gram_steps_cpu
+    assert native.kernels_for(None) is None
     monkeypatch.setenv(native.KERNEL_ENV, "fortran")
     with pytest.raises(ValueError, match="PARALLAX_PURSUIT_KERNEL"):
         matching_pursuit(torch.zeros(2, K), random_dictionary(N, K, torch.Generator()), SPARSITY)
@@ -263,16 +288,16 @@ def test_the_pursuit_kernel_choice_follows_the_argument_and_the_environment(monk
                          kernel="fortran")
 
 
-def test_without_the_kernel_the_pursuit_falls_back_with_one_warning(monkeypatch, caplog) -> None:
+def test_without_the_kernels_the_coder_falls_back_with_one_warning(monkeypatch, caplog) -> None:
     from parallax.coding import native
-    from parallax.coding.pursuit import _cpu_steps, _gram_steps_cpu
+    from parallax.coding.dictionary import gradient_step_
 
     def no_compiler():
         raise RuntimeError("no C++ compiler (simulated)")
 
     monkeypatch.setattr(native, "_build", no_compiler)
     monkeypatch.setattr(native, "_loaded", False)
-    monkeypatch.setattr(native, "_kernel", None)
+    monkeypatch.setattr(native, "_module", None)
     monkeypatch.setattr(native, "_failure", None)
     monkeypatch.delenv(native.KERNEL_ENV, raising=False)
     dictionary = random_dictionary(N, K, torch.Generator().manual_seed(26))
@@ -280,9 +305,10 @@ def test_without_the_kernel_the_pursuit_falls_back_with_one_warning(monkeypatch,
     with caplog.at_level("WARNING", logger=native.__name__):
         fallback = matching_pursuit(patches, dictionary, SPARSITY)
         again = matching_pursuit(patches, dictionary, SPARSITY)
+        gradient_step_(dictionary.clone(), fallback, 0.2)
     warnings = [record for record in caplog.records if record.name == native.__name__]
     assert len(warnings) == 1 and "simulated" in warnings[0].getMessage()
-    assert _cpu_steps("auto") is _gram_steps_cpu
+    assert native.kernels_for("auto") is None
     reference = matching_pursuit(patches, dictionary, SPARSITY, kernel="torch")
     assert torch.equal(fallback.atom_indices, reference.atom_indices)
     assert torch.equal(again.codes, reference.codes)

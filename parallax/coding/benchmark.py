@@ -1,11 +1,13 @@
 """Speed of the sensory coder (paper §3.3): encode + dictionary update of both scales.
 
-``run()`` times, side by side in one process, the Gram-form matching pursuit that the coder
-uses and the straightforward pursuit that recomputes all correlations at every step, for one
-frame pair and for a batch of 16, with learning on (the training path) and off (frozen
-dictionaries, cached Gram matrix). Each repetition times every variant in turn, so machine
-noise hits them alike; medians are reported in milliseconds. Run as
-``python -m parallax.coding.benchmark [repeats]``.
+``run()`` times, side by side in one process, the Gram-form matching pursuit with its steps in
+the compiled kernel (``gram_cpp``, what the coder uses when the kernel builds) and in the
+numpy/torch loop (``gram_torch``, the fallback), and the straightforward pursuit that recomputes
+all correlations at every step (``recompute``), for one frame pair and for a batch of 16, with
+learning on (the training path) and off (frozen dictionaries, cached Gram matrix). The keys
+ending ``_gram_ms`` repeat the figure of the Gram form the coder uses by default. Each
+repetition times every variant in turn, so machine noise hits them alike; medians are reported
+in milliseconds. Run as ``python -m parallax.coding.benchmark [repeats]``.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import torch
 
 from parallax.timing import interleaved_medians_ms
 
+from . import native
 from .coder import MultiScaleCoder
 
 SCALE_SPECS = {"coarse": {"window": 250, "subsample": 8, "patch": 10, "stride": 1},
@@ -46,11 +49,17 @@ def _coder(pursuit: str, learn: bool, scales: list[str]) -> MultiScaleCoder:
                            pursuit=pursuit)
 
 
+def _gram_variants() -> tuple[str, ...]:
+    """The Gram-form variants to time: the compiled kernel only where it builds."""
+    return ("gram_cpp", "gram_torch") if native.load_kernels() is not None else ("gram_torch",)
+
+
 def _operations() -> dict[str, Callable[[], object]]:
     operations: dict[str, Callable[[], object]] = {}
+    grams = _gram_variants()
     for batch in (1, 16):
         references, currents = _frames(batch)
-        for pursuit in ("gram", "recompute"):
+        for pursuit in (*grams, "recompute"):
             for learn in (True, False):
                 coder = _coder(pursuit, learn, ["coarse", "fine"])
                 coder.set_reference(references)
@@ -58,10 +67,11 @@ def _operations() -> dict[str, Callable[[], object]]:
                 operations[f"{mode}_both_B{batch}_{pursuit}_ms"] = (
                     lambda coder=coder, currents=currents: coder(currents))
         for scale in ("coarse", "fine"):
-            coder = _coder("gram", True, [scale])
-            coder.set_reference(references)
-            operations[f"encode_update_{scale}_B{batch}_gram_ms"] = (
-                lambda coder=coder, currents=currents: coder(currents))
+            for pursuit in grams:
+                coder = _coder(pursuit, True, [scale])
+                coder.set_reference(references)
+                operations[f"encode_update_{scale}_B{batch}_{pursuit}_ms"] = (
+                    lambda coder=coder, currents=currents: coder(currents))
         reference_coder = _coder("gram", True, ["coarse", "fine"])
         operations[f"set_reference_both_B{batch}_ms"] = (
             lambda coder=reference_coder, references=references: coder.set_reference(references))
@@ -70,10 +80,13 @@ def _operations() -> dict[str, Callable[[], object]]:
 
 def run(repeats: int = 50) -> dict[str, float]:
     """Median milliseconds per operation (names say scales, batch B, pursuit, learning), the
-    speed-ups of the Gram form, and the torch thread count; once with the process's default
-    thread count and once with a single thread (keys ending ``_1thread``)."""
+    speed-ups of the Gram form over the recomputing pursuit (``_speedup``) and of the compiled
+    kernel over the numpy/torch loop (``_cpp_speedup``), and the torch thread count; once with
+    the process's default thread count and once with a single thread (keys ending ``_1thread``)."""
     results: dict[str, float] = {}
     default_threads = torch.get_num_threads()
+    grams = _gram_variants()
+    default = grams[0]   # what pursuit="gram" runs: the kernel when it builds
     for threads, suffix in ((default_threads, ""), (1, "_1thread")):
         torch.set_num_threads(threads)
         try:
@@ -82,10 +95,15 @@ def run(repeats: int = 50) -> dict[str, float]:
             torch.set_num_threads(default_threads)
         for batch in (1, 16):
             for mode in ("encode_update", "encode_frozen"):
-                gram = timings[f"{mode}_both_B{batch}_gram_ms"]
+                gram = timings[f"{mode}_both_B{batch}_gram_ms"] = timings[f"{mode}_both_B{batch}_{default}_ms"]
                 recompute = timings[f"{mode}_both_B{batch}_recompute_ms"]
                 timings[f"{mode}_both_B{batch}_speedup"] = recompute / gram
-        results.update({name + suffix: value for name, value in timings.items()})
+                if "gram_cpp" in grams:
+                    timings[f"{mode}_both_B{batch}_cpp_speedup"] = (
+                        timings[f"{mode}_both_B{batch}_gram_torch_ms"] / timings[f"{mode}_both_B{batch}_gram_cpp_ms"])
+            for scale in ("coarse", "fine"):
+                timings[f"encode_update_{scale}_B{batch}_gram_ms"] = timings[f"encode_update_{scale}_B{batch}_{default}_ms"]
+        results.update({name + suffix: value for name, value in sorted(timings.items())})
         results[f"torch_threads{suffix}"] = float(threads)
     results["repeats"] = float(repeats)
     return results

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from . import native
 from .pursuit import SparseCode
 
 #: Atoms are divided by max(‖φ‖, this); a gradient step never comes close to zeroing an atom.
@@ -37,9 +38,16 @@ def normalise_atoms_(dictionary: torch.Tensor) -> torch.Tensor:
     return dictionary.div_(norms)
 
 
-def codes_times_residuals(code: SparseCode, n_atoms: int) -> torch.Tensor:
+def codes_times_residuals(code: SparseCode, n_atoms: int, kernel: str | None = None) -> torch.Tensor:
     """Bᵀ·R, (N, K): for every atom, the coefficient-weighted sum of the residuals of the patches
-    that picked it. Grouping the M·k picks by atom costs M·k·K instead of the dense N·M·K."""
+    that picked it. Grouping the M·k picks by atom costs M·k·K instead of the dense N·M·K.
+
+    On the CPU a compiled kernel adds up the same terms in the same order (``kernel``: see
+    :mod:`parallax.coding.native`); elsewhere, or without it, ``embedding_bag`` does."""
+    compiled = native.kernels_for(kernel) if code.residuals.device.type == "cpu" else None
+    if compiled is not None:
+        return compiled.codes_times_residuals(code.atom_indices.contiguous(), code.coefficients.contiguous(),
+                                              code.residuals.contiguous(), n_atoms)
     picks = code.atom_indices.reshape(-1)
     order = _stable_order(picks, n_atoms)
     counts = torch.bincount(picks, minlength=n_atoms)
@@ -59,12 +67,14 @@ def _stable_order(picks: torch.Tensor, n_atoms: int) -> torch.Tensor:
 
 
 @torch.no_grad()
-def gradient_step_(dictionary: torch.Tensor, code: SparseCode, learning_rate: float) -> None:
+def gradient_step_(dictionary: torch.Tensor, code: SparseCode, learning_rate: float,
+                   kernel: str | None = None) -> None:
     """One step of gradient descent on ½‖γ − Φᵀb‖² averaged over the P coded patches, in place."""
     patches = code.residuals.shape[0]
     if patches == 0:
         return
-    dictionary.add_(codes_times_residuals(code, dictionary.shape[0]), alpha=learning_rate / patches)
+    dictionary.add_(codes_times_residuals(code, dictionary.shape[0], kernel),
+                    alpha=learning_rate / patches)
     normalise_atoms_(dictionary)
 
 

@@ -1,15 +1,19 @@
-"""The compiled CPU kernel of the Gram-form matching pursuit (``pursuit_kernel.cpp``, paper eq. 1).
+"""The compiled CPU kernels of the sparse coder (``pursuit_kernel.cpp``, paper §3.3, eq. 1).
 
-:func:`fused_pursuit_kernel` builds the C++ file on first use with
-``torch.utils.cpp_extension.load`` (-O3; needs a C++ compiler and the ``ninja`` package; torch
-caches the build under ``~/.cache/torch_extensions`` or ``$TORCH_EXTENSIONS_DIR``, so later
-processes only load it), then checks once that it reproduces the torch path's picks and
-coefficients bit for bit on random data. It returns the kernel's ``gram_pursuit`` function, or
-``None`` — with one warning line saying why — when the kernel cannot be built or disagrees.
+Three functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch by patch),
+``codes_and_residuals`` (dense codes and residuals from the picks) and ``codes_times_residuals``
+(the dictionary gradient's Bᵀ·R). :func:`load_kernels` builds the C++ file on first use with
+``torch.utils.cpp_extension.load`` (-O3, ~15 s; needs a C++ compiler and the ``ninja``
+package; torch caches the build under ``~/.cache/torch_extensions`` or
+``$TORCH_EXTENSIONS_DIR``, so later processes only load it), then checks once that all three
+reproduce the numpy/torch code bit for bit on random data. It returns the module, or ``None`` —
+with one warning line saying why — when the kernels cannot be built or disagree.
 
-Which implementation the Gram-form pursuit uses on the CPU is chosen by the environment variable
-``PARALLAX_PURSUIT_KERNEL``: ``auto`` (the default: the kernel when it is available, else the
-numpy/torch loop), ``cpp`` (the kernel or an error) or ``torch`` (always the numpy/torch loop).
+Which implementation the coder uses on the CPU is chosen by the ``kernel`` argument of
+:func:`parallax.coding.pursuit.matching_pursuit` and
+:func:`parallax.coding.dictionary.gradient_step_`, or else by the environment variable
+``PARALLAX_PURSUIT_KERNEL``: ``auto`` (the default: the kernels when they are available, else
+the numpy/torch code), ``cpp`` (the kernels or an error) or ``torch`` (always numpy/torch).
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from __future__ import annotations
 import logging
 import os
 from pathlib import Path
-from typing import Callable
+from types import ModuleType
 
 import torch
 
@@ -31,7 +35,7 @@ SOURCE = Path(__file__).with_name("pursuit_kernel.cpp")
 _FMA_CAPABILITIES = ("AVX2", "AVX512")
 
 _loaded = False
-_kernel: Callable | None = None
+_module: ModuleType | None = None
 _failure: str | None = None
 
 
@@ -43,7 +47,7 @@ def kernel_choice() -> str:
     return choice
 
 
-def _build() -> Callable:
+def _build() -> ModuleType:
     from torch.utils import cpp_extension
 
     if not cpp_extension.is_ninja_available():
@@ -56,43 +60,68 @@ def _build() -> Callable:
     name = f"parallax_pursuit_{capability.lower()}"
     module = cpp_extension.load(name=name, sources=[str(SOURCE)], extra_cflags=flags,
                                 verbose=False)
-    return module.gram_pursuit
+    return module
 
 
-def _self_check(kernel: Callable) -> None:
-    """The kernel must give the torch path's picks and coefficients exactly, in both dtypes."""
-    from .pursuit import _gram_steps_cpu
+def _self_check(module: ModuleType) -> None:
+    """The kernels must give the numpy/torch code's results exactly, in both dtypes."""
+    from .dictionary import codes_times_residuals
+    from .pursuit import _finish, _gram_steps_cpu
 
     generator = torch.Generator().manual_seed(0)
     for dtype in (torch.float32, torch.float64):
-        for atoms in (40, 37):   # whole lanes, and a tail after them
+        for atoms in (40, 37):   # whole vector lanes, and a tail after them
             dictionary = torch.randn(atoms, 12, generator=generator, dtype=dtype)
             dictionary /= dictionary.norm(dim=1, keepdim=True)
             patches = torch.randn(64, 12, generator=generator, dtype=dtype)
             correlations = patches @ dictionary.T
             gram = dictionary @ dictionary.T
             expected = _gram_steps_cpu(correlations.clone(), gram, 8)
-            got = kernel(correlations.clone(), gram, 8)
-            if not (torch.equal(got[0], expected[0]) and torch.equal(got[1], expected[1])):
-                raise RuntimeError(f"its {dtype} results differ from torch's on this CPU")
+            got = module.gram_pursuit(correlations.clone(), gram, 8)
+            code = _finish(patches, dictionary, *expected)
+            codes, residuals = module.codes_and_residuals(patches, dictionary, *expected)
+            product = module.codes_times_residuals(code.atom_indices, code.coefficients,
+                                                   code.residuals, atoms)
+            for name, mine, theirs in (
+                    ("picks", got[0], expected[0]), ("coefficients", got[1], expected[1]),
+                    ("codes", codes, code.codes), ("residuals", residuals, code.residuals),
+                    ("B^T R", product, codes_times_residuals(code, atoms, kernel="torch"))):
+                if not torch.equal(mine, theirs):
+                    raise RuntimeError(f"its {dtype} {name} differ from the numpy/torch code's "
+                                       f"on this machine")
 
 
-def fused_pursuit_kernel() -> Callable | None:
-    """The compiled ``gram_pursuit(correlations, gram, sparsity)``, or None if unavailable."""
-    global _loaded, _kernel, _failure
+def load_kernels() -> ModuleType | None:
+    """The compiled module, built and checked on the first call; None if unavailable."""
+    global _loaded, _module, _failure
     if not _loaded:
         _loaded = True
         try:
-            kernel = _build()
-            _self_check(kernel)
-            _kernel = kernel
-        except Exception as error:  # noqa: BLE001 — any build failure means: use the fallback
-            _failure = f"{type(error).__name__}: {str(error).strip().splitlines()[0] if str(error).strip() else ''}"
-            log.warning("fused matching-pursuit kernel unavailable (%s); using the numpy/torch "
-                        "pursuit loop", _failure)
-    return _kernel
+            module = _build()
+            _self_check(module)
+            _module = module
+        except Exception as error:  # noqa: BLE001 — any failure means: use the fallback
+            lines = str(error).strip().splitlines()
+            _failure = f"{type(error).__name__}: {lines[0] if lines else ''}"
+            log.warning("compiled matching-pursuit kernels unavailable (%s); using the numpy/torch "
+                        "code", _failure)
+    return _module
 
 
 def kernel_failure() -> str | None:
-    """Why the kernel is unavailable (after a failed :func:`fused_pursuit_kernel`), else None."""
+    """Why the kernels are unavailable (after a failed :func:`load_kernels`), else None."""
     return _failure
+
+
+def kernels_for(kernel: str | None) -> ModuleType | None:
+    """The compiled module that ``kernel`` (None: ``PARALLAX_PURSUIT_KERNEL``) asks for, or None
+    for the numpy/torch code; ``"cpp"`` raises when the kernels are unavailable."""
+    choice = kernel_choice() if kernel is None else kernel
+    if choice not in KERNEL_CHOICES:
+        raise ValueError(f"kernel must be one of {KERNEL_CHOICES}, got {choice!r}")
+    if choice == "torch":
+        return None
+    module = load_kernels()
+    if module is None and choice == "cpp":
+        raise RuntimeError(f"the compiled matching-pursuit kernels are unavailable: {_failure}")
+    return module

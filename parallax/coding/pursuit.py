@@ -12,12 +12,13 @@ version that recomputes all correlations from the residual at every step; it is 
 and for the benchmark that compares the two. Residuals are rebuilt from the k picks per patch
 (``embedding_bag``), not from the dense (M, N) codes.
 
-On the CPU the k Gram-form steps run in a compiled kernel (``pursuit_kernel.cpp``, built on first
-use by :mod:`parallax.coding.native`) that pursues patch by patch with the patch's correlations in
-L1 cache; its picks and coefficients are bit-identical to those of the numpy/torch loop
-:func:`_gram_steps_cpu`, which remains the fallback when no compiler is available. The choice is
-``kernel=`` of :func:`matching_pursuit` or the environment variable ``PARALLAX_PURSUIT_KERNEL``:
-``auto`` (default), ``cpp`` or ``torch``. Other devices use the torch loop :func:`_gram_steps`.
+On the CPU the k Gram-form steps, the dense codes and the residuals run in compiled kernels
+(``pursuit_kernel.cpp``, built on first use by :mod:`parallax.coding.native`) that pursue patch
+by patch with the patch's correlations in L1 cache; their results are bit-identical to those of
+the numpy/torch loop :func:`_gram_steps_cpu` and :func:`_finish`, which remain the fallback when
+no compiler is available. The choice is ``kernel=`` of :func:`matching_pursuit` or the
+environment variable ``PARALLAX_PURSUIT_KERNEL``: ``auto`` (default), ``cpp`` or ``torch``.
+Other devices use the torch loop :func:`_gram_steps`.
 
 Dictionaries are (N, K) with atoms as unit-norm rows; patches are (M, K) rows. Any float dtype
 and device work; on the CPU the per-step bookkeeping runs in numpy on zero-copy views.
@@ -26,7 +27,6 @@ and device work; on the CPU the per-step bookkeeping runs in numpy on zero-copy 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import torch
@@ -86,40 +86,24 @@ def matching_pursuit(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: 
                      gram: torch.Tensor | None = None, kernel: str | None = None) -> SparseCode:
     """Batched plain MP in Gram form. ``gram`` may be passed when it is cached (Φ unchanged).
 
-    ``kernel`` picks the CPU implementation of the steps: ``"auto"`` (the compiled kernel when
-    it can be built, else the numpy/torch loop), ``"cpp"`` (the kernel, or an error) or
-    ``"torch"``; None reads ``PARALLAX_PURSUIT_KERNEL`` (default ``auto``). All give the same
-    result; other devices always use the torch loop.
+    ``kernel`` picks the CPU implementation: ``"auto"`` (the compiled kernels when they can be
+    built, else numpy/torch), ``"cpp"`` (the kernels, or an error) or ``"torch"``; None reads
+    ``PARALLAX_PURSUIT_KERNEL`` (default ``auto``). All give the same result, bit for bit; other
+    devices always use torch.
     """
     _check_inputs(patches, dictionary, sparsity)
     if gram is None:
         gram = gram_matrix(dictionary)
     correlations = patches @ dictionary.T                      # (M, N), updated in place
-    steps = _cpu_steps(kernel) if correlations.device.type == "cpu" else _gram_steps
+    compiled = native.kernels_for(kernel) if correlations.device.type == "cpu" else None
+    if compiled is not None:
+        atom_indices, coefficients = compiled.gram_pursuit(correlations, gram.contiguous(), sparsity)
+        codes, residuals = compiled.codes_and_residuals(patches.contiguous(), dictionary.contiguous(),
+                                                        atom_indices, coefficients)
+        return SparseCode(atom_indices, coefficients, codes, residuals)
+    steps = _gram_steps_cpu if correlations.device.type == "cpu" else _gram_steps
     atom_indices, coefficients = steps(correlations, gram, sparsity)
     return _finish(patches, dictionary, atom_indices, coefficients)
-
-
-def _cpu_steps(kernel: str | None) -> Callable[[torch.Tensor, torch.Tensor, int],
-                                               tuple[torch.Tensor, torch.Tensor]]:
-    """The CPU step function that ``kernel`` (or ``PARALLAX_PURSUIT_KERNEL``) asks for."""
-    choice = native.kernel_choice() if kernel is None else kernel
-    if choice not in native.KERNEL_CHOICES:
-        raise ValueError(f"kernel must be one of {native.KERNEL_CHOICES}, got {choice!r}")
-    if choice == "torch" or (choice == "auto" and native.fused_pursuit_kernel() is None):
-        return _gram_steps_cpu
-    return _gram_steps_fused
-
-
-def _gram_steps_fused(correlations: torch.Tensor, gram: torch.Tensor,
-                      sparsity: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The steps in the compiled CPU kernel, patch by patch: the same picks and coefficients as
-    :func:`_gram_steps_cpu`, bit for bit."""
-    kernel = native.fused_pursuit_kernel()
-    if kernel is None:
-        raise RuntimeError(f"the fused matching-pursuit kernel is unavailable: {native.kernel_failure()}")
-    picks, coefficients = kernel(correlations.contiguous(), gram.contiguous(), sparsity)
-    return picks, coefficients
 
 
 def _abs_argmax(values: torch.Tensor) -> torch.Tensor:

@@ -1,8 +1,11 @@
-// Fused Gram-form matching pursuit on the CPU: the paper's eq. 1 (§3.3), plain MP with k steps.
+// Fused Gram-form matching pursuit on the CPU: the paper's eq. 1 (§3.3), plain MP with k steps,
+// and the two sparse products around it (the residuals and the dictionary gradient Bᵀ·R).
 //
 // parallax/coding/native.py builds this file on first use (torch.utils.cpp_extension.load);
-// parallax/coding/pursuit.py calls it in place of its per-step numpy/torch loop. Patch by
-// patch, a row of correlations c = Φ·γ (N values, a few KiB, in L1 cache for all the steps):
+// parallax/coding/pursuit.py and dictionary.py call it in place of their numpy/torch code.
+//
+// gram_pursuit: patch by patch, a row of correlations c = Φ·γ (N values, a few KiB, in L1 cache
+// for all the steps):
 //
 //     repeat k times:  j = argmax_n |c_n|     (first maximum on ties, a NaN counts as the
 //                                              maximum: numpy's argmax)
@@ -13,18 +16,25 @@
 // multiply-add when torch's kernels use them (PARALLAX_FMA, set by native.py for its AVX2 and
 // AVX512 kernels), a multiply then a subtraction otherwise (built with -ffp-contract=off so the
 // compiler does not fuse it by itself). The picks and coefficients are then bit-identical to
-// those of the torch path; native.py checks that once before it lets the coder use the kernel.
+// those of the torch path.
+//
+// codes_and_residuals and codes_times_residuals replace scatter_add_ and torch's embedding_bag
+// (pursuit.dense_codes, pursuit.reconstruct, dictionary.codes_times_residuals) and add up in the
+// same order with the same rounding, so they too are bit-identical. native.py checks all three
+// against the torch code once before the coder uses them.
 
 // The few ATen headers it needs rather than <torch/extension.h>: the build takes ~15 s, not ~40.
 #include <ATen/Dispatch.h>
 #include <ATen/Parallel.h>
 #include <ATen/core/Tensor.h>
 #include <ATen/ops/empty.h>
+#include <ATen/ops/zeros.h>
 #include <torch/csrc/utils/pybind.h>
 
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <algorithm>
 #include <vector>
 
 namespace {
@@ -36,6 +46,17 @@ inline T subtract_scaled(T value, T coefficient, T gram) {
 #else
   return value - coefficient * gram;
 #endif
+}
+
+// acc + w·x the way torch's embedding_bag adds weighted rows: float32 goes through FBGEMM, whose
+// kernels use fused multiply-adds; other dtypes through a plain loop that multiplies then adds.
+template <typename T>
+inline T add_weighted(T acc, T weight, T value) {
+  return acc + weight * value;
+}
+template <>
+inline float add_weighted<float>(float acc, float weight, float value) {
+  return std::fma(weight, value, acc);
 }
 
 // 32-byte vectors (GCC/Clang vector extensions: AVX2 registers when built with -mavx2, pairs of
@@ -116,19 +137,35 @@ void pursue_rows(T* correlations, const T* gram, int64_t n_atoms, int64_t sparsi
   }
 }
 
+void check_cpu_contiguous(const at::Tensor& tensor, const char* name) {
+  TORCH_CHECK(tensor.device().is_cpu() && tensor.is_contiguous(), name,
+              " must be a contiguous CPU tensor");
+}
+
+void check_picks(const at::Tensor& picks, const at::Tensor& coefficients, int64_t rows,
+                 int64_t n_atoms) {
+  check_cpu_contiguous(picks, "picks");
+  check_cpu_contiguous(coefficients, "coefficients");
+  TORCH_CHECK(picks.scalar_type() == at::kLong && picks.dim() == 2 && picks.size(0) == rows &&
+                  coefficients.sizes() == picks.sizes(),
+              "picks must be (M, k) int64 and coefficients (M, k)");
+  const int64_t* p = picks.data_ptr<int64_t>();
+  for (int64_t i = 0; i < picks.numel(); ++i) {
+    TORCH_CHECK(p[i] >= 0 && p[i] < n_atoms, "pick ", p[i], " is not one of the ", n_atoms, " atoms");
+  }
+}
+
 // (M, N) correlations, updated in place, and the (N, N) Gram matrix → (M, k) int64 picks and
 // (M, k) coefficients.
 std::vector<at::Tensor> gram_pursuit(at::Tensor correlations, const at::Tensor& gram,
                                      int64_t sparsity) {
-  TORCH_CHECK(correlations.device().is_cpu() && gram.device().is_cpu(),
-              "gram_pursuit runs on CPU tensors");
+  check_cpu_contiguous(correlations, "correlations");
+  check_cpu_contiguous(gram, "gram");
   TORCH_CHECK(correlations.dim() == 2 && gram.dim() == 2 && gram.size(0) == gram.size(1) &&
                   gram.size(0) == correlations.size(1),
               "correlations must be (M, N) and gram (N, N)");
   TORCH_CHECK(correlations.scalar_type() == gram.scalar_type(),
               "correlations and gram must share a dtype");
-  TORCH_CHECK(correlations.is_contiguous() && gram.is_contiguous(),
-              "correlations and gram must be contiguous");
   TORCH_CHECK(sparsity >= 1, "sparsity must be positive");
   TORCH_CHECK(correlations.size(1) >= 1, "the dictionary needs at least one atom");
   const int64_t rows = correlations.size(0);
@@ -147,10 +184,95 @@ std::vector<at::Tensor> gram_pursuit(at::Tensor correlations, const at::Tensor& 
   return {picks, coefficients};
 }
 
+// (M, K) patches, the (N, K) dictionary and the (M, k) picks → the (M, N) codes b_{i,n}
+// (repeated picks add up, in step order) and the (M, K) residuals γ_i − Σ_s c_s·φ_{k_s}.
+std::vector<at::Tensor> codes_and_residuals(const at::Tensor& patches, const at::Tensor& dictionary,
+                                            const at::Tensor& picks,
+                                            const at::Tensor& coefficients) {
+  check_cpu_contiguous(patches, "patches");
+  check_cpu_contiguous(dictionary, "dictionary");
+  TORCH_CHECK(patches.dim() == 2 && dictionary.dim() == 2 && patches.size(1) == dictionary.size(1),
+              "patches must be (M, K) and dictionary (N, K)");
+  TORCH_CHECK(patches.scalar_type() == dictionary.scalar_type() &&
+                  coefficients.scalar_type() == patches.scalar_type(),
+              "patches, dictionary and coefficients must share a dtype");
+  const int64_t rows = patches.size(0), dim = patches.size(1), n_atoms = dictionary.size(0);
+  check_picks(picks, coefficients, rows, n_atoms);
+  const int64_t sparsity = picks.size(1);
+  at::Tensor codes = at::zeros({rows, n_atoms}, patches.options());
+  at::Tensor residuals = at::empty({rows, dim}, patches.options());
+  AT_DISPATCH_FLOATING_TYPES(patches.scalar_type(), "codes_and_residuals", [&] {
+    const scalar_t* x = patches.data_ptr<scalar_t>();
+    const scalar_t* phi = dictionary.data_ptr<scalar_t>();
+    const int64_t* p = picks.data_ptr<int64_t>();
+    const scalar_t* w = coefficients.data_ptr<scalar_t>();
+    scalar_t* b = codes.data_ptr<scalar_t>();
+    scalar_t* r = residuals.data_ptr<scalar_t>();
+    at::parallel_for(0, rows, 64, [&](int64_t begin, int64_t end) {
+      std::vector<scalar_t> reconstruction(dim);
+      for (int64_t row = begin; row < end; ++row) {
+        std::fill(reconstruction.begin(), reconstruction.end(), scalar_t(0));
+        for (int64_t step = 0; step < sparsity; ++step) {
+          const int64_t atom = p[row * sparsity + step];
+          const scalar_t weight = w[row * sparsity + step];
+          b[row * n_atoms + atom] += weight;
+          const scalar_t* a = phi + atom * dim;
+          for (int64_t j = 0; j < dim; ++j) {
+            reconstruction[j] = add_weighted(reconstruction[j], weight, a[j]);
+          }
+        }
+        for (int64_t j = 0; j < dim; ++j) {
+          r[row * dim + j] = x[row * dim + j] - reconstruction[j];
+        }
+      }
+    });
+  });
+  return {codes, residuals};
+}
+
+// Bᵀ·R, (N, K): for every atom, Σ c·r_i over the picks of that atom in (patch, step) order, from
+// the (M, k) picks and the (M, K) residuals.
+at::Tensor codes_times_residuals(const at::Tensor& picks, const at::Tensor& coefficients,
+                                 const at::Tensor& residuals, int64_t n_atoms) {
+  check_cpu_contiguous(residuals, "residuals");
+  TORCH_CHECK(residuals.dim() == 2, "residuals must be (M, K)");
+  TORCH_CHECK(coefficients.scalar_type() == residuals.scalar_type(),
+              "coefficients and residuals must share a dtype");
+  TORCH_CHECK(n_atoms >= 1, "the dictionary needs at least one atom");
+  const int64_t rows = residuals.size(0), dim = residuals.size(1);
+  check_picks(picks, coefficients, rows, n_atoms);
+  const int64_t sparsity = picks.size(1);
+  at::Tensor product = at::zeros({n_atoms, dim}, residuals.options());
+  AT_DISPATCH_FLOATING_TYPES(residuals.scalar_type(), "codes_times_residuals", [&] {
+    const int64_t* p = picks.data_ptr<int64_t>();
+    const scalar_t* w = coefficients.data_ptr<scalar_t>();
+    const scalar_t* r = residuals.data_ptr<scalar_t>();
+    scalar_t* out = product.data_ptr<scalar_t>();
+    // Threads split the K columns; each column adds up the picks in the same order.
+    at::parallel_for(0, dim, 16, [&](int64_t begin, int64_t end) {
+      for (int64_t row = 0; row < rows; ++row) {
+        const scalar_t* residual = r + row * dim;
+        for (int64_t step = 0; step < sparsity; ++step) {
+          const scalar_t weight = w[row * sparsity + step];
+          scalar_t* target = out + p[row * sparsity + step] * dim;
+          for (int64_t j = begin; j < end; ++j) {
+            target[j] = add_weighted(target[j], weight, residual[j]);
+          }
+        }
+      }
+    });
+  });
+  return product;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("gram_pursuit", &gram_pursuit,
         "k steps of Gram-form matching pursuit, patch by patch (paper eq. 1); "
         "correlations are updated in place");
+  m.def("codes_and_residuals", &codes_and_residuals,
+        "dense (M, N) codes and (M, K) residuals from the pursuit's picks");
+  m.def("codes_times_residuals", &codes_times_residuals,
+        "the dictionary gradient's B^T R, (N, K), from the picks and the residuals");
 }

@@ -18,10 +18,10 @@ from .dictionary import gradient_step_, pooled_activity, random_dictionary, reco
 from .pursuit import SparseCode, gram_matrix, matching_pursuit, matching_pursuit_recompute
 from .retina import ScaleSpec, prepare_reference, scale_patches, stack_pair
 
-#: "gram": the Gram-form pursuit, on the CPU in the compiled kernel when it can be built (see
+#: "gram": the Gram-form pursuit, on the CPU in the compiled kernels when they can be built (see
 #: ``PARALLAX_PURSUIT_KERNEL`` in :mod:`parallax.coding.native`); "gram_cpp" and "gram_torch"
-#: force the kernel or the numpy/torch loop (same results); "recompute": correlations recomputed
-#: from the residual at every step.
+#: force the kernels or the numpy/torch code, for the pursuit and the dictionary update alike
+#: (same results); "recompute": correlations recomputed from the residual at every step.
 PURSUITS = ("gram", "gram_cpp", "gram_torch", "recompute")
 _KERNELS = {"gram": None, "gram_cpp": "cpp", "gram_torch": "torch"}
 
@@ -93,7 +93,7 @@ class ScaleCoder(nn.Module):
     @torch.no_grad()
     def learn_from(self, code: SparseCode) -> None:
         """One gradient step with all the coded patches, then unit-norm atoms again."""
-        gradient_step_(self.dictionary, code, self.learning_rate)
+        gradient_step_(self.dictionary, code, self.learning_rate, kernel=_KERNELS.get(self.pursuit))
 
     @torch.no_grad()
     def forward(self, gray: torch.Tensor, learn: bool) -> ScaleOutput:
