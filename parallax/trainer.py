@@ -124,6 +124,9 @@ class Trainer:
             **{f"policy_{k}": v for k, v in pres.policy_stats.items()},
             "mae": self.eye.mae(), "mae_per_position": self.eye.mae_per_position(),
             "mae_recent": self.eye.recent_mae(int(self.cfg.metrics.summary_trials)),
+            # Tables 2–3's window per position, for python -m parallax.time_to_learn
+            "mae_recent_per_position": {
+                k: v["mean"] for k, v in self.eye.last_trials(int(self.cfg.metrics.summary_trials)).items()},
             "distance_error": self.dist.by_range(),
             # The eye-movement vectors s and their distances, exactly (JSON floats round-trip), so
             # parallax-replay can re-run the distance learner alone with another y, c or weighting.

@@ -1,0 +1,138 @@
+"""`python -m parallax.time_to_learn RUN...`: when a run's eye first met an MAE target at every
+lateral position (the speed issue's "time to learn"; the MAE is |q_p − α*| of eq. 16, over the
+last ``trials`` trials of each position, as in Tables 2–3).
+
+It reads `metrics.jsonl`: per-position recent MAEs where the trainer logged them
+(``mae_recent_per_position``), else recomputes them from the logged pans with the world's α*
+for each (distance, lateral position). Only the part before §5's perturbation counts. Wall time
+is the TensorBoard events' clock at that presentation, minus the first event's, plus one
+presentation's mean duration (a resumed run's pause would count, so use uninterrupted runs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import defaultdict, deque
+from pathlib import Path
+
+import numpy as np
+
+from parallax.config import load_run_config
+from parallax.metrics import position_label
+from parallax.report import read_metrics
+
+
+def _target_table(cfg, pairs: set[tuple[float, float]]) -> dict[tuple[float, float], float]:
+    """α* (degrees) for each (distance m, lateral m), from the world's kinematics, unperturbed."""
+    import parallax.envs
+
+    env = parallax.envs.load(seed=0, lateral_positions=[0.05], trial_length=2, image_size=32)
+    try:
+        physics = env.physics
+        table = {}
+        for distance, lateral in sorted(pairs):
+            physics.set_stimulus(0, distance)
+            physics.set_lateral_position(lateral)
+            table[(distance, lateral)] = physics.target_pan_deg()
+        return table
+    finally:
+        env.close()
+
+
+def recent_mae_per_position(run_dir: str | Path, trials: int = 100) -> list[dict]:
+    """Per unperturbed presentation: {presentation, steps, mae: {position: recent MAE}}."""
+    run_dir = Path(run_dir)
+    records = [r for r in read_metrics(run_dir) if not r.get("perturbed")]
+    cfg = load_run_config(run_dir)
+    lateral = [float(l) for l in cfg.curriculum.lateral_positions]
+    labels = [position_label(l) for l in lateral]
+    if records and all("mae_recent_per_position" in r for r in records):
+        return [{"presentation": r["presentation"], "steps": r["steps"],
+                 "mae": r["mae_recent_per_position"]} for r in records]
+    pairs = {(float(d), l) for r in records for d in r["distances"] for l in lateral}
+    targets = _target_table(cfg, pairs)
+    windows = {k: deque(maxlen=trials) for k in labels}
+    out = []
+    for r in records:
+        pans = np.asarray(r["pans"], dtype=np.float64)
+        if pans.shape[1] != len(lateral):   # a staged curriculum's earlier lists: not the final L
+            continue
+        for b, distance in enumerate(r["distances"]):
+            for p, (l, k) in enumerate(zip(lateral, labels)):
+                windows[k].append(abs(pans[b, p] - targets[(float(distance), l)]))
+        out.append({"presentation": r["presentation"], "steps": r["steps"],
+                    "mae": {k: float(np.mean(v)) for k, v in windows.items()}})
+    return out
+
+
+def _wall_clock(run_dir: Path) -> dict[int, float]:
+    """Seconds since the start of the run at each logged step, from TensorBoard's clock."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(run_dir / "tb"), size_guidance={"scalars": 0})
+    acc.Reload()
+    if "pursuit/mae_recent" not in acc.Tags().get("scalars", []):
+        return {}
+    events = acc.Scalars("pursuit/mae_recent")
+    if len(events) < 2:
+        return {}
+    start = events[0].wall_time
+    per_event = (events[-1].wall_time - start) / (len(events) - 1)
+    return {e.step: e.wall_time - start + per_event for e in events}
+
+
+def time_to_learn(run_dir: str | Path, threshold: float = 0.2, trials: int = 100) -> dict:
+    """The first presentation whose recent MAE is ≤ threshold at every position (None if never),
+    with its iterations and wall time; ``trials`` recent trials per position must exist."""
+    run_dir = Path(run_dir)
+    rows = recent_mae_per_position(run_dir, trials)
+    result = {"run_dir": str(run_dir), "threshold_deg": threshold, "trials": trials,
+              "presentations_seen": len(rows), "presentation": None, "steps": None,
+              "wall_time_s": None, "worst_position_at_end": None}
+    if rows:
+        worst = max(rows[-1]["mae"].items(), key=lambda kv: kv[1])
+        result["worst_position_at_end"] = {"position": worst[0], "mae_deg": worst[1]}
+    for i, row in enumerate(rows):
+        if i + 1 >= trials and all(v <= threshold for v in row["mae"].values()):
+            result["presentation"], result["steps"] = row["presentation"], row["steps"]
+            clock = _wall_clock(run_dir)
+            result["wall_time_s"] = clock.get(row["steps"])
+            break
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m parallax.time_to_learn",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("runs", nargs="+", help="run directories (with metrics.jsonl)")
+    parser.add_argument("--threshold", type=float, default=0.2, help="MAE target, degrees")
+    parser.add_argument("--trials", type=int, default=100, help="recent trials per position")
+    parser.add_argument("--json", help="also write the results here")
+    args = parser.parse_args(argv)
+    if args.threshold <= 0 or args.trials < 1:
+        print(f"[time_to_learn] --threshold must be > 0 and --trials ≥ 1, got {args.threshold} "
+              f"and {args.trials}", file=sys.stderr)
+        return 2
+    missing = [r for r in args.runs if not (Path(r) / "metrics.jsonl").is_file()]
+    if missing:
+        print(f"[time_to_learn] no metrics.jsonl in {missing[0]}", file=sys.stderr)
+        return 2
+    results = [time_to_learn(r, args.threshold, args.trials) for r in args.runs]
+    for r in results:
+        worst = r["worst_position_at_end"]
+        worst_text = f"worst at the end: {worst['position']} cm {worst['mae_deg']:.3f}°" if worst else "no data"
+        if r["presentation"] is None:
+            print(f"{r['run_dir']}: not reached in {r['presentations_seen']} presentations ({worst_text})")
+        else:
+            wall = f"{r['wall_time_s'] / 60:.1f} min" if r["wall_time_s"] is not None else "wall time unknown"
+            print(f"{r['run_dir']}: ≤ {r['threshold_deg']}° at every position after presentation "
+                  f"{r['presentation']} ({r['steps']} iterations, {wall}; {worst_text})")
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,60 @@
+"""python -m parallax.time_to_learn: the first presentation with a recent MAE ≤ target everywhere."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from parallax import time_to_learn as ttl
+from parallax.config import compose
+from parallax.trainer import Trainer
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    from tests.conftest import TINY
+
+    run = tmp_path_factory.mktemp("run")
+    trainer = Trainer(compose(TINY + ["train.presentations=5"]), run)
+    try:
+        trainer.fit()
+    finally:
+        trainer.exp.close()
+    return run
+
+
+def test_recomputed_targets_agree_with_the_trainers_log(tiny_run, tmp_path):
+    logged = ttl.recent_mae_per_position(tiny_run, trials=100)
+    assert [r["presentation"] for r in logged] == [1, 2, 3, 4, 5]
+    # the same run without the logged per-position MAEs (as written before they were logged)
+    stripped = tmp_path / "old"
+    stripped.mkdir()
+    (stripped / "config.yaml").write_text((tiny_run / "config.yaml").read_text())
+    lines = [json.loads(l) for l in (tiny_run / "metrics.jsonl").read_text().splitlines()]
+    for line in lines:
+        del line["mae_recent_per_position"]
+    (stripped / "metrics.jsonl").write_text("".join(json.dumps(l) + "\n" for l in lines))
+    recomputed = ttl.recent_mae_per_position(stripped, trials=100)
+    for a, b in zip(logged, recomputed):
+        assert a["mae"].keys() == b["mae"].keys()
+        for k in a["mae"]:
+            assert b["mae"][k] == pytest.approx(a["mae"][k], abs=1e-9)
+
+
+def test_threshold_decides_and_needs_enough_trials(tiny_run):
+    worst = max(ttl.recent_mae_per_position(tiny_run, trials=2)[-1]["mae"].values())
+    reached = ttl.time_to_learn(tiny_run, threshold=worst + 10.0, trials=2)
+    assert reached["presentation"] == 2 and reached["steps"] > 0   # the first with 2 trials each
+    assert reached["wall_time_s"] is not None and reached["wall_time_s"] > 0
+    never = ttl.time_to_learn(tiny_run, threshold=1e-9, trials=2)
+    assert never["presentation"] is None and never["worst_position_at_end"]["mae_deg"] == pytest.approx(worst)
+
+
+def test_cli_refuses_bad_input(tiny_run, tmp_path, capsys):
+    assert ttl.main([str(tiny_run), "--threshold", "0"]) == 2
+    assert "--threshold must be > 0" in capsys.readouterr().err
+    assert ttl.main([str(tmp_path)]) == 2
+    assert "no metrics.jsonl" in capsys.readouterr().err
+    assert ttl.main([str(tiny_run), "--threshold", "100", "--trials", "1"]) == 0
+    assert "after presentation 1" in capsys.readouterr().out
