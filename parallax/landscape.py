@@ -27,7 +27,7 @@ from parallax.experiment import Experiment
 
 def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME,
           lateral_position: float | None = None, distances=(3.0, 5.0, 7.0, 10.0), textures: int = 4,
-          span: float = 1.0, step: float = 0.05) -> dict:
+          span: float = 1.0, step: float = 0.05, texture_indices=None) -> dict:
     """Rewards (stimuli × offsets), per-scale errors and E_π[a] around α*; see the module doc."""
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
@@ -42,7 +42,7 @@ def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME
         env, physics = exp.envs[0], exp.envs[0].physics
         rewards, errors, mean_steps = [], [], []
         for distance in distances:
-            for texture in range(textures):
+            for texture in (range(textures) if texture_indices is None else texture_indices):
                 env.task.set_next_stimulus(texture_index=texture, distance=float(distance))
                 env.reset()
                 exp.coder.set_reference(torch.from_numpy(env.task._reference[None].copy()))
@@ -79,6 +79,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="lateral position in metres (default: the run's first)")
     parser.add_argument("--distances", type=float, nargs="+", default=[3.0, 5.0, 7.0, 10.0])
     parser.add_argument("--textures", type=int, default=4, help="training textures per distance")
+    parser.add_argument("--texture-indices", type=int, nargs="+", default=None,
+                        help="these training textures instead of the first --textures")
     parser.add_argument("--span", type=float, default=1.0, help="largest |pan − α*|, degrees")
     parser.add_argument("--json", help="also write the result here")
     args = parser.parse_args(argv)
@@ -90,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     torch.set_num_threads(1)
-    result = sweep(args.run_dir, args.checkpoint, args.lateral, args.distances, args.textures, args.span)
+    result = sweep(args.run_dir, args.checkpoint, args.lateral, args.distances, args.textures, args.span,
+                    texture_indices=args.texture_indices)
     header = "offset °   reward  " + "  ".join(f"e_{s:<6}" for s in result["scales"]) + "  E[step] °"
     print(header)
     for i, offset in enumerate(result["offsets_deg"]):
