@@ -18,10 +18,13 @@ the numpy/torch code), ``cpp`` (the kernels or an error) or ``torch`` (always nu
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import logging
 import os
 from pathlib import Path
 from types import ModuleType
+from typing import Iterator
 
 import torch
 
@@ -58,9 +61,26 @@ def _build() -> ModuleType:
         # torch runs its AVX2 kernels on this CPU, so it has AVX2 and FMA too.
         flags += ["-mavx2", "-mfma", "-DPARALLAX_FMA"]
     name = f"parallax_pursuit_{capability.lower()}"
-    module = cpp_extension.load(name=name, sources=[str(SOURCE)], extra_cflags=flags,
-                                verbose=False)
-    return module
+    build_directory = Path(cpp_extension._get_build_directory(name, verbose=False))
+    if not (build_directory / f"{name}.so").exists():
+        log.info("compiling the matching-pursuit kernels into %s (once, ~15 s)", build_directory)
+    with _exclusive(build_directory / "parallax.flock"):
+        # torch's own lock file outlives a build that was killed, and then every later build
+        # waits for it forever; while we hold our lock no other build of ours can be running.
+        (build_directory / "lock").unlink(missing_ok=True)
+        return cpp_extension.load(name=name, sources=[str(SOURCE)], extra_cflags=flags,
+                                  build_directory=str(build_directory), verbose=False)
+
+
+@contextlib.contextmanager
+def _exclusive(path: Path) -> Iterator[None]:
+    """An advisory lock on ``path`` that the system drops when its process dies."""
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def _self_check(module: ModuleType) -> None:
