@@ -275,11 +275,22 @@ def test_fused_kernels_give_the_torch_codes_residuals_and_gradient_bit_for_bit(c
         assert torch.equal(stepped[0], stepped[1]) and not torch.equal(stepped[0], dictionary)
 
 
+def test_half_precision_takes_the_torch_code_even_when_the_kernels_are_asked_for(compiled) -> None:
+    from parallax.coding.dictionary import gradient_step_
+
+    dictionary = random_dictionary(30, 20, torch.Generator().manual_seed(29), dtype=torch.float16)
+    patches = torch.randn(7, 20, generator=torch.Generator().manual_seed(30)).half()
+    asked, plain = (matching_pursuit(patches, dictionary, 4, kernel=kernel) for kernel in ("cpp", "torch"))
+    assert torch.equal(asked.codes, plain.codes) and torch.equal(asked.residuals, plain.residuals)
+    gradient_step_(dictionary, asked, 0.1, kernel="cpp")
+    assert dictionary.dtype == torch.float16 and torch.isfinite(dictionary).all()
+
+
 def test_the_kernel_choice_follows_the_argument_and_the_environment(monkeypatch) -> None:
     from parallax.coding import native
 
     monkeypatch.setenv(native.KERNEL_ENV, "torch")
-    assert native.kernels_for(None) is None
+    assert native.kernels_for(None, torch.zeros(1)) is None
     monkeypatch.setenv(native.KERNEL_ENV, "fortran")
     with pytest.raises(ValueError, match="PARALLAX_PURSUIT_KERNEL"):
         matching_pursuit(torch.zeros(2, K), random_dictionary(N, K, torch.Generator()), SPARSITY)
@@ -308,7 +319,7 @@ def test_without_the_kernels_the_coder_falls_back_with_one_warning(monkeypatch, 
         gradient_step_(dictionary.clone(), fallback, 0.2)
     warnings = [record for record in caplog.records if record.name == native.__name__]
     assert len(warnings) == 1 and "simulated" in warnings[0].getMessage()
-    assert native.kernels_for("auto") is None
+    assert native.kernels_for("auto", torch.zeros(1)) is None
     reference = matching_pursuit(patches, dictionary, SPARSITY, kernel="torch")
     assert torch.equal(fallback.atom_indices, reference.atom_indices)
     assert torch.equal(again.codes, reference.codes)

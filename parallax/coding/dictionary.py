@@ -44,7 +44,7 @@ def codes_times_residuals(code: SparseCode, n_atoms: int, kernel: str | None = N
 
     On the CPU a compiled kernel adds up the same terms in the same order (``kernel``: see
     :mod:`parallax.coding.native`); elsewhere, or without it, ``embedding_bag`` does."""
-    compiled = native.kernels_for(kernel) if code.residuals.device.type == "cpu" else None
+    compiled = native.kernels_for(kernel, code.residuals)
     if compiled is not None:
         return compiled.codes_times_residuals(code.atom_indices.contiguous(), code.coefficients.contiguous(),
                                               code.residuals.contiguous(), n_atoms)

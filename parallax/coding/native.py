@@ -19,7 +19,6 @@ the numpy/torch code), ``cpp`` (the kernels or an error) or ``torch`` (always nu
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import logging
 import os
 from pathlib import Path
@@ -61,7 +60,7 @@ def _build() -> ModuleType:
         # torch runs its AVX2 kernels on this CPU, so it has AVX2 and FMA too.
         flags += ["-mavx2", "-mfma", "-DPARALLAX_FMA"]
     name = f"parallax_pursuit_{capability.lower()}"
-    build_directory = Path(cpp_extension._get_build_directory(name, verbose=False))
+    build_directory = _build_directory(cpp_extension, name)
     if not (build_directory / f"{name}.so").exists():
         log.info("compiling the matching-pursuit kernels into %s (once, ~15 s)", build_directory)
     with _exclusive(build_directory / "parallax.flock"):
@@ -72,9 +71,25 @@ def _build() -> ModuleType:
                                   build_directory=str(build_directory), verbose=False)
 
 
+def _build_directory(cpp_extension: ModuleType, name: str) -> Path:
+    """Where torch would build ``name`` (``$TORCH_EXTENSIONS_DIR`` or its cache), created."""
+    torchs_choice = getattr(cpp_extension, "_get_build_directory", None)
+    if torchs_choice is not None:
+        return Path(torchs_choice(name, verbose=False))
+    root = os.environ.get("TORCH_EXTENSIONS_DIR") or cpp_extension.get_default_build_root()
+    directory = Path(root) / name
+    directory.mkdir(parents=True, exist_ok=True)
+    return directory
+
+
 @contextlib.contextmanager
 def _exclusive(path: Path) -> Iterator[None]:
-    """An advisory lock on ``path`` that the system drops when its process dies."""
+    """An advisory lock on ``path`` that the system drops when its process dies (POSIX only)."""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
     with open(path, "a") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:
@@ -133,13 +148,19 @@ def kernel_failure() -> str | None:
     return _failure
 
 
-def kernels_for(kernel: str | None) -> ModuleType | None:
-    """The compiled module that ``kernel`` (None: ``PARALLAX_PURSUIT_KERNEL``) asks for, or None
-    for the numpy/torch code; ``"cpp"`` raises when the kernels are unavailable."""
+#: What the kernels take; other tensors go to the numpy/torch code whatever the choice.
+KERNEL_DTYPES = (torch.float32, torch.float64)
+
+
+def kernels_for(kernel: str | None, like: torch.Tensor) -> ModuleType | None:
+    """The compiled module that ``kernel`` (None: ``PARALLAX_PURSUIT_KERNEL``) asks for, to work
+    on tensors like ``like``; None for the numpy/torch code, which also takes what the kernels do
+    not (tensors on another device, half precision). ``"cpp"`` raises when the kernels are
+    unavailable."""
     choice = kernel_choice() if kernel is None else kernel
     if choice not in KERNEL_CHOICES:
         raise ValueError(f"kernel must be one of {KERNEL_CHOICES}, got {choice!r}")
-    if choice == "torch":
+    if choice == "torch" or like.device.type != "cpu" or like.dtype not in KERNEL_DTYPES:
         return None
     module = load_kernels()
     if module is None and choice == "cpp":

@@ -89,13 +89,13 @@ def matching_pursuit(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: 
     ``kernel`` picks the CPU implementation: ``"auto"`` (the compiled kernels when they can be
     built, else numpy/torch), ``"cpp"`` (the kernels, or an error) or ``"torch"``; None reads
     ``PARALLAX_PURSUIT_KERNEL`` (default ``auto``). All give the same result, bit for bit; other
-    devices always use torch.
+    devices and dtypes than float32/float64 always use torch.
     """
     _check_inputs(patches, dictionary, sparsity)
     if gram is None:
         gram = gram_matrix(dictionary)
     correlations = patches @ dictionary.T                      # (M, N), updated in place
-    compiled = native.kernels_for(kernel) if correlations.device.type == "cpu" else None
+    compiled = native.kernels_for(kernel, correlations)
     if compiled is not None:
         atom_indices, coefficients = compiled.gram_pursuit(correlations, gram.contiguous(), sparsity)
         codes, residuals = compiled.codes_and_residuals(patches.contiguous(), dictionary.contiguous(),
