@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections import defaultdict, deque
+from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -41,30 +41,57 @@ def _target_table(cfg, pairs: set[tuple[float, float]]) -> dict[tuple[float, flo
         env.close()
 
 
-def recent_mae_per_position(run_dir: str | Path, trials: int = 100) -> list[dict]:
-    """Per unperturbed presentation: {presentation, steps, mae: {position: recent MAE}}."""
+def trial_errors(run_dir: str | Path) -> dict:
+    """|q_p − α*| of every robot's trial before the perturbation, recomputed from the logged pans
+    with the world's α*: {"presentations": [...], "steps": [...], "errors": (trials, r) array,
+    "labels": [...]}; rows follow the log (B rows per presentation)."""
     run_dir = Path(run_dir)
     records = [r for r in read_metrics(run_dir) if not r.get("perturbed")]
     cfg = load_run_config(run_dir)
     lateral = [float(l) for l in cfg.curriculum.lateral_positions]
-    labels = [position_label(l) for l in lateral]
+    # a staged curriculum's earlier lists are not the final L: left out
+    records = [r for r in records if np.asarray(r["pans"]).shape[1] == len(lateral)]
+    targets = _target_table(cfg, {(float(d), l) for r in records for d in r["distances"] for l in lateral})
+    rows, presentations, steps = [], [], []
+    for r in records:
+        for pans, distance in zip(r["pans"], r["distances"]):
+            rows.append([abs(q - targets[(float(distance), l)]) for q, l in zip(pans, lateral)])
+            presentations.append(r["presentation"])
+            steps.append(r["steps"])
+    return {"presentations": presentations, "steps": steps, "labels": [position_label(l) for l in lateral],
+            "errors": np.asarray(rows, dtype=np.float64).reshape(-1, len(lateral))}
+
+
+def recent_mae_per_position(run_dir: str | Path, trials: int = 100) -> list[dict]:
+    """Per unperturbed presentation: {presentation, steps, mae: {position: recent MAE}}."""
+    run_dir = Path(run_dir)
+    records = [r for r in read_metrics(run_dir) if not r.get("perturbed")]
     if records and all("mae_recent_per_position" in r for r in records):
         return [{"presentation": r["presentation"], "steps": r["steps"],
                  "mae": r["mae_recent_per_position"]} for r in records]
-    pairs = {(float(d), l) for r in records for d in r["distances"] for l in lateral}
-    targets = _target_table(cfg, pairs)
-    windows = {k: deque(maxlen=trials) for k in labels}
+    table = trial_errors(run_dir)
+    windows = {k: deque(maxlen=trials) for k in table["labels"]}
     out = []
-    for r in records:
-        pans = np.asarray(r["pans"], dtype=np.float64)
-        if pans.shape[1] != len(lateral):   # a staged curriculum's earlier lists: not the final L
-            continue
-        for b, distance in enumerate(r["distances"]):
-            for p, (l, k) in enumerate(zip(lateral, labels)):
-                windows[k].append(abs(pans[b, p] - targets[(float(distance), l)]))
-        out.append({"presentation": r["presentation"], "steps": r["steps"],
-                    "mae": {k: float(np.mean(v)) for k, v in windows.items()}})
+    for i, row in enumerate(table["errors"]):
+        for k, e in zip(table["labels"], row):
+            windows[k].append(float(e))
+        last_of_presentation = (i + 1 == len(table["errors"])
+                                or table["presentations"][i + 1] != table["presentations"][i])
+        if last_of_presentation:
+            out.append({"presentation": table["presentations"][i], "steps": table["steps"][i],
+                        "mae": {k: float(np.mean(v)) for k, v in windows.items()}})
     return out
+
+
+def last_trials_spread(run_dir: str | Path, trials: int = 100, runaway_deg: float = 1.0) -> dict:
+    """Per position, over the last ``trials`` trials before the perturbation: mean (Tables 2–3),
+    median, and the share of trials off by more than ``runaway_deg`` — a mean far above the
+    median means a few runaway trials, not a uniformly imprecise eye."""
+    table = trial_errors(run_dir)
+    tail = table["errors"][-trials:]
+    return {k: {"mean": float(tail[:, p].mean()), "median": float(np.median(tail[:, p])),
+                "runaway_share": float((tail[:, p] > runaway_deg).mean()), "trials": int(tail.shape[0])}
+            for p, k in enumerate(table["labels"])}
 
 
 def _wall_clock(run_dir: Path) -> dict[int, float]:
@@ -109,6 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("runs", nargs="+", help="run directories (with metrics.jsonl)")
     parser.add_argument("--threshold", type=float, default=0.2, help="MAE target, degrees")
     parser.add_argument("--trials", type=int, default=100, help="recent trials per position")
+    parser.add_argument("--spread", action="store_true",
+                        help="also print the last trials' mean, median and share off by > 1° per position")
     parser.add_argument("--json", help="also write the results here")
     args = parser.parse_args(argv)
     if args.threshold <= 0 or args.trials < 1:
@@ -129,6 +158,12 @@ def main(argv: list[str] | None = None) -> int:
             wall = f"{r['wall_time_s'] / 60:.1f} min" if r["wall_time_s"] is not None else "wall time unknown"
             print(f"{r['run_dir']}: ≤ {r['threshold_deg']}° at every position after presentation "
                   f"{r['presentation']} ({r['steps']} iterations, {wall}; {worst_text})")
+        if args.spread:
+            spread = last_trials_spread(r["run_dir"], args.trials)
+            r["spread"] = spread
+            print("  last trials before the perturbation, per position: "
+                  + "  ".join(f"{k} cm {v['mean']:.2f}/{v['median']:.2f}°/{100 * v['runaway_share']:.0f}%"
+                              for k, v in spread.items()) + "   (mean/median/share > 1°)")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
     return 0

@@ -58,3 +58,14 @@ def test_cli_refuses_bad_input(tiny_run, tmp_path, capsys):
     assert "no metrics.jsonl" in capsys.readouterr().err
     assert ttl.main([str(tiny_run), "--threshold", "100", "--trials", "1"]) == 0
     assert "after presentation 1" in capsys.readouterr().out
+
+
+def test_spread_mean_is_the_tables_mean_and_counts_runaways(tiny_run):
+    spread = ttl.last_trials_spread(tiny_run, trials=3, runaway_deg=0.0)
+    recent = ttl.recent_mae_per_position(tiny_run, trials=3)[-1]["mae"]
+    assert spread.keys() == recent.keys()
+    for k, v in spread.items():
+        assert v["mean"] == pytest.approx(recent[k]) and v["trials"] == 3
+        assert v["runaway_share"] == 1.0          # every trial is off by more than 0°
+    none_off = ttl.last_trials_spread(tiny_run, trials=3, runaway_deg=1e9)
+    assert all(v["runaway_share"] == 0.0 for v in none_off.values())
