@@ -3,7 +3,7 @@ lateral position (the speed issue's "time to learn"; the MAE is |q_p − α*| of
 last ``trials`` trials of each position, as in Tables 2–3).
 
 It reads `metrics.jsonl`: per-position recent MAEs where the trainer logged them
-(``mae_recent_per_position``), else recomputes them from the logged pans with the world's α*
+(``mae_recent_per_position``, over metrics.summary_trials trials), else recomputes them from the logged pans with the world's α*
 for each (distance, lateral position). Only the part before §5's perturbation counts. Wall time
 is the TensorBoard events' clock at that presentation, minus the first event's, plus one
 presentation's mean duration (a resumed run's pause would count, so use uninterrupted runs).
@@ -66,7 +66,8 @@ def recent_mae_per_position(run_dir: str | Path, trials: int = 100) -> list[dict
     """Per unperturbed presentation: {presentation, steps, mae: {position: recent MAE}}."""
     run_dir = Path(run_dir)
     records = [r for r in read_metrics(run_dir) if not r.get("perturbed")]
-    if records and all("mae_recent_per_position" in r for r in records):
+    logged_window = int(load_run_config(run_dir).metrics.summary_trials)
+    if trials == logged_window and records and all("mae_recent_per_position" in r for r in records):
         return [{"presentation": r["presentation"], "steps": r["steps"],
                  "mae": r["mae_recent_per_position"]} for r in records]
     table = trial_errors(run_dir)
