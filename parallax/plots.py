@@ -158,3 +158,19 @@ def ablation_bars(labels: Sequence[str], panels: dict[str, tuple[Sequence[float]
         ax.set_title(name, fontsize=9)
     fig.suptitle(title, fontsize=10)
     return _save(fig, path)
+
+
+def learning_curves_by_robots(curves: dict[str, dict], path: str | Path, trials: int) -> Path:
+    """Worst-position recent MAE against robot-iterations and against wall time (issue 7's B = 1
+    against B = 16): one line per run, from parallax.time_to_learn.learning_curve."""
+    fig, (by_steps, by_time) = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    for label, curve in curves.items():
+        by_steps.plot(curve["robot_iterations"], curve["worst_mae_deg"], label=label)
+        by_time.plot(np.asarray(curve["wall_time_s"]) / 60.0, curve["worst_mae_deg"], label=label)
+    by_steps.set_xlabel("robot-iterations (iterations × B)")
+    by_time.set_xlabel("wall time (min)")
+    by_steps.set_ylabel(f"worst position's MAE of the last {trials} trials (deg)")
+    for ax in (by_steps, by_time):
+        ax.grid(alpha=0.3)
+    by_time.legend(fontsize=8)
+    return _save(fig, Path(path))

@@ -131,6 +131,30 @@ def time_to_learn(run_dir: str | Path, threshold: float = 0.2, trials: int = 100
     return result
 
 
+def learning_curve(run_dir: str | Path, trials: int = 100) -> dict:
+    """The worst position's recent MAE after each presentation, against robot-iterations (steps ×
+    robots: what B robots experienced together) and against wall time — how B = 1 and B = 16
+    compare per environment step and per second."""
+    run_dir = Path(run_dir)
+    robots = int(load_run_config(run_dir).env.robots)
+    rows = recent_mae_per_position(run_dir, trials)
+    clock = _wall_clock(run_dir)
+    return {"robots": robots,
+            "robot_iterations": [r["steps"] * robots for r in rows],
+            "wall_time_s": [clock.get(r["steps"], float("nan")) for r in rows],
+            "worst_mae_deg": [max(r["mae"].values()) for r in rows]}
+
+
+def plot_learning_curves(run_dirs, path: str | Path, trials: int = 100) -> Path:
+    from parallax import plots
+
+    curves = {}
+    for run_dir in run_dirs:
+        cfg = load_run_config(run_dir)
+        curves[f"B={int(cfg.env.robots)}, seed {int(cfg.seed)}"] = learning_curve(run_dir, trials)
+    return plots.learning_curves_by_robots(curves, path, trials)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m parallax.time_to_learn",
                                      description=__doc__.split("\n\n")[0])
@@ -139,6 +163,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trials", type=int, default=100, help="recent trials per position")
     parser.add_argument("--spread", action="store_true",
                         help="also print the last trials' mean, median and share off by > 1° per position")
+    parser.add_argument("--curves", help="also plot the worst position's recent MAE against "
+                        "robot-iterations and wall time into this PNG (B = 1 against B = 16)")
     parser.add_argument("--json", help="also write the results here")
     args = parser.parse_args(argv)
     if args.threshold <= 0 or args.trials < 1:
@@ -165,6 +191,8 @@ def main(argv: list[str] | None = None) -> int:
             print("  last trials before the perturbation, per position: "
                   + "  ".join(f"{k} cm {v['mean']:.2f}/{v['median']:.2f}°/{100 * v['runaway_share']:.0f}%"
                               for k, v in spread.items()) + "   (mean/median/share > 1°)")
+    if args.curves:
+        print(f"curves: {plot_learning_curves(args.runs, args.curves, args.trials)}")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
     return 0

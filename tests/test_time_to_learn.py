@@ -69,3 +69,13 @@ def test_spread_mean_is_the_tables_mean_and_counts_runaways(tiny_run):
         assert v["runaway_share"] == 1.0          # every trial is off by more than 0°
     none_off = ttl.last_trials_spread(tiny_run, trials=3, runaway_deg=1e9)
     assert all(v["runaway_share"] == 0.0 for v in none_off.values())
+
+
+def test_learning_curve_counts_robot_iterations_and_plots(tiny_run, tmp_path):
+    curve = ttl.learning_curve(tiny_run, trials=2)
+    steps = [r["steps"] for r in ttl.recent_mae_per_position(tiny_run, trials=2)]
+    assert curve["robots"] == 1 and curve["robot_iterations"] == steps
+    assert len(curve["worst_mae_deg"]) == len(steps) == len(curve["wall_time_s"])
+    out = tmp_path / "curves.png"
+    assert ttl.main([str(tiny_run), "--trials", "2", "--curves", str(out)]) == 0
+    assert out.stat().st_size > 1000
