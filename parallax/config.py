@@ -74,6 +74,33 @@ def load_run_config(run_dir: str | Path) -> DictConfig:
     return OmegaConf.load(path)
 
 
+#: Settings that may differ when a run is resumed: they change no result (or, for
+#: train.presentations, only how long the run goes on).
+RESUMABLE_CHANGES = ("resume", "device", "train.threads", "train.checkpoint_every",
+                     "train.image_every", "train.presentations")
+
+
+def changed_settings(saved: DictConfig, current: DictConfig) -> list[str]:
+    """``key: saved → current`` for every setting that differs between a run's saved config and
+    the config it is being resumed with (RESUMABLE_CHANGES aside). A default changed in conf/
+    since the run started shows up here, so a resumed run never mixes two settings silently."""
+    def flat(node, prefix=""):
+        out = {}
+        for key, value in node.items():
+            name = f"{prefix}{key}"
+            if isinstance(value, dict):
+                out.update(flat(value, name + "."))
+            else:
+                out[name] = value
+        return out
+
+    before = flat(OmegaConf.to_container(saved, resolve=True))
+    after = flat(OmegaConf.to_container(current, resolve=True))
+    return [f"{key}: {before.get(key, '(unset)')!r} → {after.get(key, '(unset)')!r}"
+            for key in sorted(set(before) | set(after))
+            if key not in RESUMABLE_CHANGES and before.get(key) != after.get(key)]
+
+
 def perturbation_start(cfg) -> int | None:
     """Presentation index at which §5's perturbation is switched on (None: never).
 

@@ -174,3 +174,24 @@ def test_a_stop_signal_during_a_checkpoint_write_waits_for_the_rename(tmp_path):
         sig.signal(sig.SIGUSR2, old)
     assert seen == [True]  # delivered once, after the rename
     assert checkpoint.load(tmp_path / "c.pt")["a"][-1] == 999
+
+
+def test_resuming_with_other_settings_is_refused_and_loses_nothing(tmp_path, tiny_overrides):
+    """Run directories are named by the overrides only: after a default changed in conf/, the
+    same command must not continue an old run with the new value."""
+    from parallax.config import changed_settings, load_run_config
+
+    run = tmp_path / "run"
+    overrides = tiny_overrides + ["train.presentations=1"]
+    _train(run, overrides)
+    saved = load_run_config(run)
+    assert changed_settings(saved, compose(overrides + ["train.presentations=5", "train.threads=2"])) == []
+    assert changed_settings(saved, compose(overrides + ["coder.learning_rate=0.3"])) == [
+        "coder.learning_rate: 0.01 → 0.3"]
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    cli = [sys.executable, "-m", "parallax.train", *overrides, "coder.learning_rate=0.3", f"hydra.run.dir={run}"]
+    proc = subprocess.run(cli, capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 2
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("parallax-train: error")]
+    assert len(errors) == 1 and "coder.learning_rate: 0.01 → 0.3" in errors[0]
+    assert all((run / name).read_bytes() == data for name, data in before.items())  # Hydra may add train.log
