@@ -97,8 +97,13 @@ def last_trials_spread(run_dir: str | Path, trials: int = 100, runaway_deg: floa
 
 def _wall_clock(run_dir: Path) -> dict[int, float]:
     """Seconds since the start of the run at each logged step, from TensorBoard's clock."""
+    import logging
+
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
+    # a resumed run's writer starts a new events file with a purge marker; TensorBoard warns
+    # about it, but the scalars read here are complete
+    logging.getLogger("tensorboard").setLevel(logging.ERROR)
     acc = EventAccumulator(str(run_dir / "tb"), size_guidance={"scalars": 0})
     acc.Reload()
     if "pursuit/mae_recent" not in acc.Tags().get("scalars", []):
