@@ -34,6 +34,19 @@ def tiny_overrides() -> list[str]:
     return list(TINY)
 
 
+def train_tiny_run(run_dir, extra_overrides=()):
+    """Trains the shrunken default experiment (plus ``extra_overrides``) into ``run_dir``."""
+    from parallax.config import compose
+    from parallax.trainer import Trainer
+
+    trainer = Trainer(compose(TINY + list(extra_overrides)), run_dir)
+    try:
+        trainer.fit()
+    finally:
+        trainer.exp.close()
+    return run_dir
+
+
 @pytest.fixture(autouse=True)
 def _one_torch_thread():
     """The suite's tensors are small: a second intra-op thread only adds synchronisation, and on

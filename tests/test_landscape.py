@@ -8,21 +8,13 @@ import numpy as np
 import pytest
 
 from parallax import landscape
-from parallax.config import compose
-from parallax.trainer import Trainer
 
 
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
-    from tests.conftest import TINY
+    from tests.conftest import train_tiny_run
 
-    run = tmp_path_factory.mktemp("run")
-    trainer = Trainer(compose(TINY + ["train.presentations=2"]), run)
-    try:
-        trainer.fit()
-    finally:
-        trainer.exp.close()
-    return run
+    return train_tiny_run(tmp_path_factory.mktemp("run"), ["train.presentations=2"])
 
 
 def test_sweep_is_centred_on_the_target_and_reads_only(tiny_run):

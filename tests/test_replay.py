@@ -7,25 +7,18 @@ import json
 
 import pytest
 
-from parallax.config import compose, load_run_config
+from parallax.config import load_run_config
 from parallax.distance.replay import ReplayError, main, parse_sweep, replay
-from parallax.trainer import Trainer
 
 
 @pytest.fixture(scope="module")
 def perturbed_run(tmp_path_factory):
-    from tests.conftest import TINY
+    from tests.conftest import train_tiny_run
 
-    run = tmp_path_factory.mktemp("run")
     # 8 presentations, queue c = 3, weighting on, perturbation from presentation 4
-    cfg = compose(TINY + ["train.presentations=8", "distance.weighting=true", "distance.y=1.0",
-                          "perturbation=rotate_blur", "perturbation.start_fraction=0.5"])
-    trainer = Trainer(cfg, run)
-    try:
-        trainer.fit()
-    finally:
-        trainer.exp.close()
-    return run
+    return train_tiny_run(tmp_path_factory.mktemp("run"), [
+        "train.presentations=8", "distance.weighting=true", "distance.y=1.0",
+        "perturbation=rotate_blur", "perturbation.start_fraction=0.5"])
 
 
 def test_replay_as_trained_is_bit_identical(perturbed_run):

@@ -7,21 +7,13 @@ import json
 import pytest
 
 from parallax import time_to_learn as ttl
-from parallax.config import compose
-from parallax.trainer import Trainer
 
 
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
-    from tests.conftest import TINY
+    from tests.conftest import train_tiny_run
 
-    run = tmp_path_factory.mktemp("run")
-    trainer = Trainer(compose(TINY + ["train.presentations=5"]), run)
-    try:
-        trainer.fit()
-    finally:
-        trainer.exp.close()
-    return run
+    return train_tiny_run(tmp_path_factory.mktemp("run"), ["train.presentations=5"])
 
 
 def test_recomputed_targets_agree_with_the_trainers_log(tiny_run, tmp_path):
