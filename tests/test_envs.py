@@ -201,6 +201,32 @@ def test_pan_accumulates_increments_and_is_kept_when_asked():
     env.close()
 
 
+def test_trials_can_start_from_a_jittered_pan_without_touching_the_reference():
+    env = small_env(trial_length=2, initial_pan_jitter_deg=0.5)
+    starts = []
+    for _ in range(4):
+        first = env.reset().observation
+        starts.append(float(first["pan"]))
+        env.step(0.0)
+        starts.append(float(env.step(0.0).observation["pan"]))   # the second trial's start
+        env.step(0.0)
+    assert all(-0.5 <= p <= 0.5 for p in starts) and len(set(starts)) == len(starts)
+    physics = env.physics
+    physics.set_lateral_position(0.0)
+    physics.set_pan_deg(0.0)
+    assert np.array_equal(first["reference"], physics.render_left_eye())   # I0 is still at pan 0
+    env.close()
+    # no jitter draws nothing: the same textures and distances as before the option existed
+    plain, zero = small_env(), small_env(initial_pan_jitter_deg=0.0)
+    for _ in range(3):
+        a, b = plain.reset().observation, zero.reset().observation
+        assert (a["texture_index"], a["distance"], a["pan"]) == (b["texture_index"], b["distance"], 0.0)
+    plain.close()
+    zero.close()
+    with pytest.raises(ValueError, match="initial_pan_jitter_deg=-1"):
+        small_env(initial_pan_jitter_deg=-1)
+
+
 def test_reference_is_the_l0_image_with_pan_zero():
     env = small_env()
     first = env.reset().observation

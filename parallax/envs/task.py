@@ -77,7 +77,8 @@ class LateralPursuitTask(base.Task):
 
     def __init__(self, lateral_positions: Sequence[float], trial_length: int,
                  distances: tuple[float, ...], num_textures: int, pan_reset: bool = True,
-                 max_pan_increment_deg: float = max(ACTION_SET_DEG), random: Any = None):
+                 max_pan_increment_deg: float = max(ACTION_SET_DEG), random: Any = None,
+                 initial_pan_jitter_deg: float = 0.0):
         super().__init__(random=random)
         if isinstance(trial_length, bool) or not isinstance(trial_length, (int, np.integer)) or trial_length < 2:
             raise ValueError(f"trial_length={trial_length!r}: expected an integer ≥ 2 (t_h iterations per position)")
@@ -86,6 +87,10 @@ class LateralPursuitTask(base.Task):
         if isinstance(max_pan_increment_deg, bool) or not isinstance(max_pan_increment_deg, (int, float)) \
                 or not (math.isfinite(max_pan_increment_deg) and max_pan_increment_deg > 0):
             raise ValueError(f"max_pan_increment_deg={max_pan_increment_deg!r}: expected a positive number")
+        if isinstance(initial_pan_jitter_deg, bool) or not isinstance(initial_pan_jitter_deg, (int, float)) \
+                or not (math.isfinite(initial_pan_jitter_deg) and initial_pan_jitter_deg >= 0):
+            raise ValueError(f"initial_pan_jitter_deg={initial_pan_jitter_deg!r}: expected a number ≥ 0 (degrees)")
+        self._initial_pan_jitter = float(initial_pan_jitter_deg)
         self._pending_positions = check_lateral_positions(lateral_positions)
         self._episode_positions = self._pending_positions
         self._trial_length = int(trial_length)
@@ -171,7 +176,7 @@ class LateralPursuitTask(base.Task):
         reference.setflags(write=False)
         self._reference = reference
         physics.set_lateral_position(self._episode_positions[0])
-        physics.set_pan_deg(0.0)
+        physics.set_pan_deg(self._trial_start_pan())
         self._position_index = 0
         self._iteration = 0
 
@@ -186,7 +191,15 @@ class LateralPursuitTask(base.Task):
         self._iteration = 0
         physics.set_lateral_position(self._episode_positions[self._position_index])
         if self._pan_reset:
-            physics.set_pan_deg(0.0)
+            physics.set_pan_deg(self._trial_start_pan())
+
+    def _trial_start_pan(self) -> float:
+        """The pan a trial starts from: 0 (the paper), or uniform in ±initial_pan_jitter_deg so
+        that the eye also learns from the far side of the target (beyond the paper). With no
+        jitter nothing is drawn, so the random stream is the paper setting's."""
+        if self._initial_pan_jitter == 0.0:
+            return 0.0
+        return float(self.random.uniform(-self._initial_pan_jitter, self._initial_pan_jitter))
 
     def _pan_increment(self, action: Any) -> float:
         value = np.asarray(action, dtype=np.float64)
@@ -256,7 +269,8 @@ def load(seed: int | None = None,
          camera_rotation_deg: float = 0.0,
          rotation_axis: str | Sequence[float] = "optical",
          blur_sigma: float = 0.0,
-         max_pan_increment_deg: float = max(ACTION_SET_DEG)) -> PursuitEnvironment:
+         max_pan_increment_deg: float = max(ACTION_SET_DEG),
+         initial_pan_jitter_deg: float = 0.0) -> PursuitEnvironment:
     """The HOAP-3 lateral-pursuit world as a dm_control environment (see the module docstring).
 
     ``stimuli``: {"source": "skimage" | "dir" | "procedural", "split": "train" | "heldout",
@@ -267,7 +281,8 @@ def load(seed: int | None = None,
     grid = distance_grid(distances)
     texture_set = load_stimuli(stimuli)
     task = LateralPursuitTask(lateral, trial_length, grid, texture_set.count, pan_reset=pan_reset,
-                              max_pan_increment_deg=max_pan_increment_deg, random=seed)
+                              max_pan_increment_deg=max_pan_increment_deg, random=seed,
+                              initial_pan_jitter_deg=initial_pan_jitter_deg)
     physics = Physics.create(texture_set, image_size=image_size, max_distance_m=max(grid))
     physics.set_perturbation(camera_rotation_deg=camera_rotation_deg, blur_sigma=blur_sigma,
                              rotation_axis=rotation_axis)
