@@ -44,8 +44,8 @@ def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME
         for distance in distances:
             for texture in (range(textures) if texture_indices is None else texture_indices):
                 env.task.set_next_stimulus(texture_index=texture, distance=float(distance))
-                env.reset()
-                exp.coder.set_reference(torch.from_numpy(env.task._reference[None].copy()))
+                reference = env.reset().observation["reference"]
+                exp.coder.set_reference(torch.from_numpy(reference[None].copy()))
                 physics.set_lateral_position(lateral)
                 target = physics.target_pan_deg()
                 row_r, row_e, row_a = [], [], []

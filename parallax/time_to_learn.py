@@ -121,6 +121,7 @@ def time_to_learn(run_dir: str | Path, threshold: float = 0.2, trials: int = 100
     with its iterations and wall time; ``trials`` recent trials per position must exist."""
     run_dir = Path(run_dir)
     rows = recent_mae_per_position(run_dir, trials)
+    robots = int(load_run_config(run_dir).env.robots)  # trials per position per presentation
     result = {"run_dir": str(run_dir), "threshold_deg": threshold, "trials": trials,
               "presentations_seen": len(rows), "presentation": None, "steps": None,
               "wall_time_s": None, "worst_position_at_end": None}
@@ -128,7 +129,7 @@ def time_to_learn(run_dir: str | Path, threshold: float = 0.2, trials: int = 100
         worst = max(rows[-1]["mae"].items(), key=lambda kv: kv[1])
         result["worst_position_at_end"] = {"position": worst[0], "mae_deg": worst[1]}
     for i, row in enumerate(rows):
-        if i + 1 >= trials and all(v <= threshold for v in row["mae"].values()):
+        if (i + 1) * robots >= trials and all(v <= threshold for v in row["mae"].values()):
             result["presentation"], result["steps"] = row["presentation"], row["steps"]
             clock = _wall_clock(run_dir)
             result["wall_time_s"] = clock.get(row["steps"])

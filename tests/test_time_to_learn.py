@@ -71,3 +71,12 @@ def test_learning_curve_counts_robot_iterations_and_plots(tiny_run, tmp_path):
     out = tmp_path / "curves.png"
     assert ttl.main([str(tiny_run), "--trials", "2", "--curves", str(out)]) == 0
     assert out.stat().st_size > 1000
+
+
+def test_batched_robots_fill_the_window_b_trials_per_presentation(tmp_path):
+    from tests.conftest import train_tiny_run
+
+    run = train_tiny_run(tmp_path / "b2", ["env.robots=2", "train.presentations=3"])
+    # 2 robots: 4 trials per position after 2 presentations
+    assert ttl.time_to_learn(run, threshold=1e9, trials=4)["presentation"] == 2
+    assert ttl.learning_curve(run, trials=4)["robot_iterations"][0] == 2 * ttl.recent_mae_per_position(run)[0]["steps"]
