@@ -14,17 +14,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections import deque
 from pathlib import Path
 
 import numpy as np
 
 from parallax.config import load_run_config
-from parallax.metrics import position_label
+from parallax.metrics import EyeMovementTracker, position_label
 from parallax.report import read_metrics
 
 
-def _target_table(cfg, pairs: set[tuple[float, float]]) -> dict[tuple[float, float], float]:
+def _target_table(pairs: set[tuple[float, float]]) -> dict[tuple[float, float], float]:
     """α* (degrees) for each (distance m, lateral m), from the world's kinematics, unperturbed."""
     import parallax.envs
 
@@ -42,28 +41,32 @@ def _target_table(cfg, pairs: set[tuple[float, float]]) -> dict[tuple[float, flo
 
 
 def trial_errors(run_dir: str | Path) -> dict:
-    """|q_p − α*| of every robot's trial before the perturbation, recomputed from the logged pans
-    with the world's α*: {"presentations": [...], "steps": [...], "errors": (trials, r) array,
-    "labels": [...]}; rows follow the log (B rows per presentation)."""
+    """Every robot's trials before the perturbation, from the logged pans and the world's α*:
+    {"presentations", "steps" (one per row), "lateral_positions", "labels", "pans" and "targets"
+    ((trials, r) arrays, B rows per presentation), "errors" = |pans − targets|}."""
     run_dir = Path(run_dir)
     records = [r for r in read_metrics(run_dir) if not r.get("perturbed")]
-    cfg = load_run_config(run_dir)
-    lateral = [float(l) for l in cfg.curriculum.lateral_positions]
+    lateral = [float(l) for l in load_run_config(run_dir).curriculum.lateral_positions]
     # a staged curriculum's earlier lists are not the final L: left out
     records = [r for r in records if np.asarray(r["pans"]).shape[1] == len(lateral)]
-    targets = _target_table(cfg, {(float(d), l) for r in records for d in r["distances"] for l in lateral})
-    rows, presentations, steps = [], [], []
+    table = _target_table({(float(d), l) for r in records for d in r["distances"] for l in lateral})
+    pans, targets, presentations, steps = [], [], [], []
     for r in records:
-        for pans, distance in zip(r["pans"], r["distances"]):
-            rows.append([abs(q - targets[(float(distance), l)]) for q, l in zip(pans, lateral)])
+        for row, distance in zip(r["pans"], r["distances"]):
+            pans.append(row)
+            targets.append([table[(float(distance), l)] for l in lateral])
             presentations.append(r["presentation"])
             steps.append(r["steps"])
-    return {"presentations": presentations, "steps": steps, "labels": [position_label(l) for l in lateral],
-            "errors": np.asarray(rows, dtype=np.float64).reshape(-1, len(lateral))}
+    pans_arr = np.asarray(pans, dtype=np.float64).reshape(-1, len(lateral))
+    targets_arr = np.asarray(targets, dtype=np.float64).reshape(-1, len(lateral))
+    return {"presentations": presentations, "steps": steps, "lateral_positions": lateral,
+            "labels": [position_label(l) for l in lateral], "pans": pans_arr, "targets": targets_arr,
+            "errors": np.abs(pans_arr - targets_arr)}
 
 
 def recent_mae_per_position(run_dir: str | Path, trials: int = 100) -> list[dict]:
-    """Per unperturbed presentation: {presentation, steps, mae: {position: recent MAE}}."""
+    """Per unperturbed presentation: {presentation, steps, mae: {position: recent MAE}} — the
+    trainer's own EyeMovementTracker.last_trials, logged or replayed on the recomputed trials."""
     run_dir = Path(run_dir)
     records = [r for r in read_metrics(run_dir) if not r.get("perturbed")]
     logged_window = int(load_run_config(run_dir).metrics.summary_trials)
@@ -71,16 +74,16 @@ def recent_mae_per_position(run_dir: str | Path, trials: int = 100) -> list[dict
         return [{"presentation": r["presentation"], "steps": r["steps"],
                  "mae": r["mae_recent_per_position"]} for r in records]
     table = trial_errors(run_dir)
-    windows = {k: deque(maxlen=trials) for k in table["labels"]}
+    tracker = EyeMovementTracker(table["lateral_positions"], window=trials)
     out = []
-    for i, row in enumerate(table["errors"]):
-        for k, e in zip(table["labels"], row):
-            windows[k].append(float(e))
-        last_of_presentation = (i + 1 == len(table["errors"])
+    for i, (pans, targets) in enumerate(zip(table["pans"], table["targets"])):
+        for label, pan, target in zip(table["labels"], pans, targets):
+            tracker.record(label, pan, target)
+        last_of_presentation = (i + 1 == len(table["pans"])
                                 or table["presentations"][i + 1] != table["presentations"][i])
         if last_of_presentation:
             out.append({"presentation": table["presentations"][i], "steps": table["steps"][i],
-                        "mae": {k: float(np.mean(v)) for k, v in windows.items()}})
+                        "mae": {k: v["mean"] for k, v in tracker.last_trials(trials).items()}})
     return out
 
 
