@@ -10,7 +10,7 @@ from __future__ import annotations
 import hashlib
 import re
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -74,28 +74,42 @@ def load_run_config(run_dir: str | Path) -> DictConfig:
     return OmegaConf.load(path)
 
 
-#: Settings that may differ when a run is resumed: they change no result (or, for
-#: train.presentations, only how long the run goes on).
-RESUMABLE_CHANGES = ("resume", "device", "train.threads", "train.checkpoint_every",
-                     "train.image_every", "train.presentations")
+#: Settings that never change a run's results (the same list as the run-directory name ignores
+#: in conf/config.yaml).
+RESULT_NEUTRAL_KEYS = frozenset({"device", "resume", "train.threads", "train.checkpoint_every",
+                                 "train.image_every"})
+#: Settings that may differ when a run is resumed: those, and train.presentations (which only
+#: changes how long the run goes on).
+RESUMABLE_CHANGES = RESULT_NEUTRAL_KEYS | {"train.presentations"}
+
+
+def _freeze(value: Any) -> Any:
+    """A hashable copy of a config value (lists become tuples)."""
+    if isinstance(value, dict):
+        return tuple(sorted((k, _freeze(v)) for k, v in value.items()))
+    if isinstance(value, (list, tuple)):
+        return tuple(_freeze(v) for v in value)
+    return value
+
+
+def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
+    """{'coder.scales': ('coarse', 'fine'), …}: dotted keys, hashable values."""
+    flat: dict[str, Any] = {}
+    for key, value in config.items():
+        dotted = f"{prefix}{key}"
+        if isinstance(value, dict) and value:
+            flat.update(flatten(value, dotted + "."))
+        else:
+            flat[dotted] = _freeze(value)
+    return flat
 
 
 def changed_settings(saved: DictConfig, current: DictConfig) -> list[str]:
     """``key: saved → current`` for every setting that differs between a run's saved config and
     the config it is being resumed with (RESUMABLE_CHANGES aside). A default changed in conf/
     since the run started shows up here, so a resumed run never mixes two settings silently."""
-    def flat(node, prefix=""):
-        out = {}
-        for key, value in node.items():
-            name = f"{prefix}{key}"
-            if isinstance(value, dict):
-                out.update(flat(value, name + "."))
-            else:
-                out[name] = value
-        return out
-
-    before = flat(OmegaConf.to_container(saved, resolve=True))
-    after = flat(OmegaConf.to_container(current, resolve=True))
+    before = flatten(OmegaConf.to_container(saved, resolve=True))
+    after = flatten(OmegaConf.to_container(current, resolve=True))
     return [f"{key}: {before.get(key, '(unset)')!r} → {after.get(key, '(unset)')!r}"
             for key in sorted(set(before) | set(after))
             if key not in RESUMABLE_CHANGES and before.get(key) != after.get(key)]

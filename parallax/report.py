@@ -36,7 +36,7 @@ from omegaconf.errors import OmegaConfBaseException
 from yaml import YAMLError
 
 from parallax import paper_results as paper
-from parallax.config import perturbation_start
+from parallax.config import RESULT_NEUTRAL_KEYS, flatten, perturbation_start
 from parallax.metrics import position_label
 
 SUMMARY_NAME = "summary.json"
@@ -46,10 +46,8 @@ RUN_CONFIG_NAME = "config.yaml"
 HYDRA_CONFIG = Path(".hydra") / "config.yaml"
 HYDRA_OVERRIDES = Path(".hydra") / "overrides.yaml"
 
-#: Settings that never change a run's results (the same list as the run-directory name ignores
-#: in conf/config.yaml, plus the seed, which is what a group averages over).
-IGNORED_KEYS = frozenset({"seed", "device", "resume", "train.threads", "train.checkpoint_every",
-                          "train.image_every"})
+#: Settings that never change a run's results, plus the seed, which is what a group averages over.
+IGNORED_KEYS = RESULT_NEUTRAL_KEYS | {"seed"}
 
 #: Settings that name an ablation when they vary; listed first, and never folded into another.
 PREFERRED_FACTORS = ("curriculum.name", "curriculum.lateral_positions", "coder.scales", "distance.y",
@@ -113,27 +111,6 @@ def _json_ready(obj: Any) -> Any:
 
 
 # --- runs -----------------------------------------------------------------------------------------
-
-def _freeze(value: Any) -> Any:
-    """A hashable copy of a config value (lists become tuples)."""
-    if isinstance(value, dict):
-        return tuple(sorted((k, _freeze(v)) for k, v in value.items()))
-    if isinstance(value, (list, tuple)):
-        return tuple(_freeze(v) for v in value)
-    return value
-
-
-def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
-    """{'coder.scales': ('coarse', 'fine'), …}: dotted keys, hashable values."""
-    flat: dict[str, Any] = {}
-    for key, value in config.items():
-        dotted = f"{prefix}{key}"
-        if isinstance(value, dict) and value:
-            flat.update(flatten(value, dotted + "."))
-        else:
-            flat[dotted] = _freeze(value)
-    return flat
-
 
 def _load_yaml(path: Path) -> Any:
     """A YAML file as plain containers, read the way OmegaConf wrote it ('???' stays a string)."""
