@@ -22,6 +22,7 @@ import torch
 
 from parallax import checkpoint
 from parallax.config import load_run_config
+from parallax.envs.best_match import views_around_target
 from parallax.experiment import Experiment
 
 
@@ -39,20 +40,14 @@ def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME
         lateral = exp.lateral_positions[0] if lateral_position is None else float(lateral_position)
         offsets = np.round(np.arange(-span, span + step / 2, step), 6)
         actions = exp.policy.action_values.cpu().numpy()
-        env, physics = exp.envs[0], exp.envs[0].physics
         rewards, errors, mean_steps = [], [], []
         for distance in distances:
             for texture in (range(textures) if texture_indices is None else texture_indices):
-                env.task.set_next_stimulus(texture_index=texture, distance=float(distance))
-                reference = env.reset().observation["reference"]
+                reference, _, views = views_around_target(exp.envs[0], texture, float(distance), lateral, offsets)
                 exp.coder.set_reference(torch.from_numpy(reference[None].copy()))
-                physics.set_lateral_position(lateral)
-                target = physics.target_pan_deg()
                 row_r, row_e, row_a = [], [], []
-                for offset in offsets:
-                    physics.set_pan_deg(target + offset)
-                    image = torch.from_numpy(physics.render_left_eye()[None].copy())
-                    out = exp.coder(image, learn=False)
+                for frame in views:
+                    out = exp.coder(torch.from_numpy(frame[None].copy()), learn=False)
                     row_r.append(float(out.reward[0]))
                     row_e.append([float(e[0]) for e in out.errors.values()])
                     row_a.append(float(exp.policy.probabilities(out.state)[0].cpu().numpy() @ actions))

@@ -34,24 +34,35 @@ def window(image: np.ndarray, spec: ScaleSpec) -> np.ndarray:
     return pyramid_down(gray, spec.pyramid_levels)[0].numpy()
 
 
+def views_around_target(env, texture: int, distance: float, lateral: float, offsets: np.ndarray):
+    """Shows ``texture`` at ``distance``, puts the robot at ``lateral`` and returns (I0, α*, frames):
+    the left eye's image at each pan α* + offset (degrees). Shared with parallax.landscape."""
+    env.task.set_next_stimulus(texture_index=texture, distance=distance)
+    reference = env.reset().observation["reference"]
+    physics = env.physics
+    physics.set_lateral_position(lateral)
+    target = physics.target_pan_deg()
+
+    def frames():
+        for offset in offsets:
+            physics.set_pan_deg(float(target + offset))
+            yield physics.render_left_eye()
+
+    return reference, target, frames()
+
+
 def best_match_offsets(distance: float, lateral: float, textures: int, span_deg: float = 1.0,
                        step_deg: float = 0.05, seed: int = 0) -> dict[str, list[float]]:
     """scale → per texture, argmin over pans of MSE(window(I(pan)), window(I0)) minus α*, degrees."""
     env = parallax.envs.load(seed=seed, lateral_positions=[lateral], trial_length=30)
-    physics = env.physics
     specs = scale_specs()
     offsets: dict[str, list[float]] = {name: [] for name in specs}
+    steps = np.arange(-span_deg, span_deg + step_deg / 2, step_deg)
     try:
         for texture in range(textures):
-            env.task.set_next_stimulus(texture_index=texture, distance=distance)
-            reference = env.reset().observation["reference"]
-            physics.set_lateral_position(lateral)
-            target = physics.target_pan_deg()
-            pans = target + np.arange(-span_deg, span_deg + step_deg / 2, step_deg)
-            frames = []
-            for pan in pans:
-                physics.set_pan_deg(float(pan))
-                frames.append(physics.render_left_eye())
+            reference, target, views = views_around_target(env, texture, distance, lateral, steps)
+            frames = list(views)
+            pans = target + steps
             for name, spec in specs.items():
                 ref = window(reference, spec)
                 errors = [float(np.mean((window(f, spec) - ref) ** 2)) for f in frames]
