@@ -104,12 +104,23 @@ def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
     return flat
 
 
+#: Settings added to conf/ after runs had been made without them, with the value such runs were
+#: trained with: a saved config that lacks one of them is read as having that value, so adding a
+#: setting neither blocks resuming old runs nor makes it look like an ablation in a report.
+SETTINGS_ADDED_LATER: dict[str, Any] = {"distance.outlier_mads": None, "distance.lm.weight_decay": 0.0}
+
+
+def run_settings(config: dict) -> dict[str, Any]:
+    """``flatten(config)`` with SETTINGS_ADDED_LATER filled in where the config predates them."""
+    return {**SETTINGS_ADDED_LATER, **flatten(config)}
+
+
 def changed_settings(saved: DictConfig, current: DictConfig) -> list[str]:
     """``key: saved → current`` for every setting that differs between a run's saved config and
     the config it is being resumed with (RESUMABLE_CHANGES aside). A default changed in conf/
     since the run started shows up here, so a resumed run never mixes two settings silently."""
-    before = flatten(OmegaConf.to_container(saved, resolve=True))
-    after = flatten(OmegaConf.to_container(current, resolve=True))
+    before = run_settings(OmegaConf.to_container(saved, resolve=True))
+    after = run_settings(OmegaConf.to_container(current, resolve=True))
     return [f"{key}: {before.get(key, '(unset)')!r} → {after.get(key, '(unset)')!r}"
             for key in sorted(set(before) | set(after))
             if key not in RESUMABLE_CHANGES and before.get(key) != after.get(key)]

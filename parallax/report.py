@@ -36,7 +36,7 @@ from omegaconf.errors import OmegaConfBaseException
 from yaml import YAMLError
 
 from parallax import paper_results as paper
-from parallax.config import RESULT_NEUTRAL_KEYS, flatten, perturbation_start
+from parallax.config import RESULT_NEUTRAL_KEYS, perturbation_start, run_settings
 from parallax.metrics import position_label
 
 SUMMARY_NAME = "summary.json"
@@ -134,7 +134,7 @@ class Run:
 
     @property
     def flat(self) -> dict[str, Any]:
-        return flatten(self.config)
+        return run_settings(self.config)
 
     @property
     def seed(self) -> Any:
@@ -407,7 +407,7 @@ def default_flat_config() -> dict[str, Any]:
     """The shipped default configuration, flattened (the baseline of each ablation)."""
     from parallax.config import compose
 
-    return flatten(OmegaConf.to_container(compose([]), resolve=False))
+    return run_settings(OmegaConf.to_container(compose([]), resolve=False))
 
 
 def find_factors(groups: Sequence[Group], defaults: dict[str, Any] | None = None) -> list[Factor]:

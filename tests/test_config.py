@@ -72,3 +72,18 @@ def test_seeds_for_is_deterministic_and_distinct():
     assert seeds_for(0, 5) == seeds_for(0, 5)
     assert len(set(seeds_for(0, 5))) == 5
     assert seeds_for(0, 5) != seeds_for(1, 5)
+
+
+def test_a_run_saved_before_a_setting_existed_has_that_settings_old_value():
+    from omegaconf import OmegaConf
+
+    from parallax.config import SETTINGS_ADDED_LATER, changed_settings
+
+    current = compose([])
+    saved = OmegaConf.create(OmegaConf.to_container(current))
+    del saved.distance.lm["weight_decay"]
+    del saved.distance["outlier_mads"]
+    assert set(SETTINGS_ADDED_LATER) == {"distance.lm.weight_decay", "distance.outlier_mads"}
+    assert changed_settings(saved, current) == []
+    assert changed_settings(saved, compose(["distance.lm.weight_decay=0.01"])) == [
+        "distance.lm.weight_decay: 0.0 → 0.01"]

@@ -205,3 +205,26 @@ def test_rejects_bad_settings_and_data():
         optimizer.step(lambda forward, x: forward(x).squeeze(-1), torch.full((3, 2), math.inf))
     with pytest.raises(ValueError, match="epochs"):
         optimizer.run(lambda forward, x: forward(x).squeeze(-1), torch.ones(3, 2), epochs=0)
+
+
+@pytest.mark.parametrize("per_sample", [False, True])
+def test_weight_decay_finds_the_ridge_solution(per_sample):
+    # Beyond trainlm: Σe² + λ‖w‖² (bias included). For a linear model that is ridge regression,
+    # whose minimiser has a closed form.
+    generator = torch.Generator().manual_seed(5)
+    inputs = torch.randn(12, 3, generator=generator, dtype=torch.float64)
+    targets = inputs @ torch.tensor([1.5, -2.0, 0.5], dtype=torch.float64) + 0.3
+    targets = targets + 0.1 * torch.randn(12, generator=generator, dtype=torch.float64)
+    decay = 2.0
+    model = nn.Linear(3, 1, dtype=torch.float64)
+    optimizer = LevenbergMarquardt(model, weight_decay=decay)
+    result = optimizer.run(lambda forward, x, y: forward(x).squeeze(-1) - y, inputs, targets, epochs=50,
+                           per_sample=per_sample)
+    design = torch.cat([inputs, torch.ones(12, 1, dtype=torch.float64)], dim=1)
+    ridge = torch.linalg.solve(design.T @ design + decay * torch.eye(4, dtype=torch.float64), design.T @ targets)
+    torch.testing.assert_close(torch.cat([model.weight.detach().reshape(-1), model.bias.detach()]), ridge,
+                               rtol=1e-6, atol=1e-6)
+    data_sse = float((model(inputs).squeeze(-1) - targets).detach().square().sum())
+    assert result.sse == pytest.approx(data_sse + decay * float(ridge.square().sum()), rel=1e-9)
+    with pytest.raises(ValueError, match="weight_decay must be a finite number ≥ 0, got -1"):
+        LevenbergMarquardt(nn.Linear(2, 1), weight_decay=-1)

@@ -12,6 +12,10 @@ function is unchanged by the refit, so the warm start really starts where the la
 μ is carried from one fit to the next (the queue changes by one sample); if a fit ended with
 μ > mu_max the next one starts again from the initial μ. The reported ``loss`` is the mean
 squared error in m² over the queue after the fit (LM itself minimises the sum of squares).
+
+Beyond the paper: with ``outlier_mads`` set, each fit leaves out the queued vectors that disagree
+with their neighbours (runaway pursuits; ``parallax.distance.consistency``). The queue itself is
+the paper's.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from parallax.distance.consistency import check_settings, consistent_mask
 from parallax.distance.levenberg_marquardt import LevenbergMarquardt
 from parallax.distance.network import DistanceMLP
 from parallax.distance.queue_memory import QueueMemory
@@ -31,7 +36,7 @@ from parallax.distance.weighting import position_weights, sensitive_positions
 
 DEFAULT_SENSITIVITY = {"patch": 10, "subsample": 8.0, "nearest_distance": 3.0, "tolerance": 2.5}
 DEFAULT_LM = {"mu": 1e-3, "mu_decrease": 0.1, "mu_increase": 10.0, "mu_max": 1e10, "min_grad": 1e-7,
-              "max_params": 5000, "max_jacobian_elements": 20_000_000}
+              "max_params": 5000, "max_jacobian_elements": 20_000_000, "weight_decay": 0.0}
 STATE_VERSION = 1
 
 
@@ -54,7 +59,8 @@ class DistanceLearner:
                  weighting: bool = True, y: float = 1.0, sensitivity: Mapping[str, float] | None = None,
                  epochs_per_call: int = 10, initial_epochs: int = 100, lm: Mapping[str, float] | None = None,
                  targets: "str | TargetSource" = "ground_truth", seed: int = 0,
-                 input_scaling: str = "global") -> None:
+                 input_scaling: str = "global", outlier_mads: float | None = None,
+                 outlier_neighbours: int = 8) -> None:
         self.lateral_positions = [float(value) for value in lateral_positions]
         if not self.lateral_positions or not all(math.isfinite(v) for v in self.lateral_positions):
             raise ValueError(f"lateral_positions must be a non-empty list of finite metres, got {lateral_positions!r}")
@@ -62,6 +68,9 @@ class DistanceLearner:
             if int(value) != value or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         self.epochs_per_call, self.initial_epochs = int(epochs_per_call), int(initial_epochs)
+        check_settings(outlier_mads, outlier_neighbours)
+        self.outlier_mads = None if outlier_mads is None else float(outlier_mads)
+        self.outlier_neighbours = int(outlier_neighbours)
         self.sensitivity = _merged("sensitivity", DEFAULT_SENSITIVITY, sensitivity)
         self.sensitive = sensitive_positions(self.lateral_positions, **self.sensitivity)
         flags = self.sensitive if weighting else [False] * len(self.lateral_positions)
@@ -94,7 +103,8 @@ class DistanceLearner:
 
         trained (0/1), loss (MSE in m² over the queue after the fit; NaN before the first fit),
         rmse_m, epochs (accepted LM steps), mu, grad_norm (‖Jᵀe‖ at the last epoch), stopped_min_grad,
-        stopped_mu_max, stopped_non_finite (0/1) and queue_fill.
+        stopped_mu_max, stopped_non_finite (0/1), queue_fill and outliers (queued vectors the fit
+        left out, see ``parallax.distance.consistency``; always 0 with ``outlier_mads`` null).
         """
         inputs = self._as_inputs(s)
         if inputs.dim() != 1:
@@ -103,21 +113,29 @@ class DistanceLearner:
         self.observations += 1
         stats = {"trained": 0.0, "loss": math.nan, "rmse_m": math.nan, "epochs": 0.0, "mu": self.optimizer.mu,
                  "grad_norm": math.nan, "stopped_min_grad": 0.0, "stopped_mu_max": 0.0,
-                 "stopped_non_finite": 0.0, "queue_fill": float(self.queue.fill)}
+                 "stopped_non_finite": 0.0, "queue_fill": float(self.queue.fill), "outliers": 0.0}
         if not self.queue.is_full:
             return stats
         if self.optimizer.mu > self.optimizer.mu_max:
             self.optimizer.mu = self.optimizer.initial_mu
-        weighted, targets = self.queue.inputs * self.weights, self.queue.targets
+        inputs, targets = self.queue.inputs, self.queue.targets
+        if self.outlier_mads is not None:
+            keep = consistent_mask(inputs, targets, self.outlier_mads, self.outlier_neighbours)
+            inputs, targets = inputs[keep], targets[keep]
+        weighted = inputs * self.weights
         self.network.fit_scaling(weighted, targets, preserve_function=self.fits > 0)
         epochs = self.initial_epochs if self.fits == 0 else self.epochs_per_call
         result = self.optimizer.run(_regression_residuals, weighted, targets, epochs=epochs, per_sample=True)
         self.fits += 1
         mse = result.sse / targets.numel()
+        if self.optimizer.weight_decay:  # result.sse holds λ‖w‖² too; report the data's error only
+            with torch.no_grad():
+                mse = float(_regression_residuals(self.network, weighted, targets).square().mean())
         stats.update(trained=1.0, loss=mse, rmse_m=math.sqrt(mse), epochs=float(result.epochs), mu=result.mu,
                      grad_norm=result.grad_norm, stopped_min_grad=float(result.stop == "min_grad"),
                      stopped_mu_max=float(result.stop == "mu_max"),
-                     stopped_non_finite=float(result.stop == "non_finite_jacobian"))
+                     stopped_non_finite=float(result.stop == "non_finite_jacobian"),
+                     outliers=float(self.queue.fill - targets.numel()))
         return stats
 
     def predict(self, S: "Tensor | np.ndarray | Sequence[Sequence[float]]") -> "Tensor | np.ndarray":

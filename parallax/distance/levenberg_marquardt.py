@@ -66,8 +66,12 @@ class LevenbergMarquardt:
 
     def __init__(self, model: nn.Module, *, mu: float = 1e-3, mu_decrease: float = 0.1,
                  mu_increase: float = 10.0, mu_max: float = 1e10, min_grad: float = 1e-7,
-                 max_params: int = 5000, max_jacobian_elements: int = 20_000_000) -> None:
+                 max_params: int = 5000, max_jacobian_elements: int = 20_000_000,
+                 weight_decay: float = 0.0) -> None:
         self.model = model
+        self.weight_decay = float(weight_decay)
+        if not math.isfinite(self.weight_decay) or self.weight_decay < 0:
+            raise ValueError(f"weight_decay must be a finite number ≥ 0, got {weight_decay!r}")
         self.initial_mu = _positive("mu", mu)
         self.mu_decrease = _positive("mu_decrease", mu_decrease)
         self.mu_increase = _positive("mu_increase", mu_increase)
@@ -111,7 +115,11 @@ class LevenbergMarquardt:
         def forward(*args: object, **kwargs: object) -> Tensor:
             return functional_call(self.model, params, args, kwargs)
 
-        return closure(forward, *batch).reshape(-1)
+        residuals = closure(forward, *batch).reshape(-1)
+        if self.weight_decay:
+            # Σe² + λ‖w‖² is a sum of squares too: the parameters become extra residuals √λ·w
+            residuals = torch.cat([residuals, math.sqrt(self.weight_decay) * flat.to(residuals.dtype)])
+        return residuals
 
     def _jacobian(self, flat: Tensor, closure: ResidualClosure, batch: tuple[Tensor, ...],
                   per_sample: bool) -> Tensor:
@@ -119,11 +127,19 @@ class LevenbergMarquardt:
             return jacrev(lambda f: self._residuals(f, closure, batch))(flat)
 
         def one_sample(f: Tensor, *sample: Tensor) -> Tensor:
-            return self._residuals(f, closure, tuple(t.unsqueeze(0) for t in sample))
+            params = self._unflatten(f)
+
+            def forward(*args: object, **kwargs: object) -> Tensor:
+                return functional_call(self.model, params, args, kwargs)
+
+            return closure(forward, *(t.unsqueeze(0) for t in sample)).reshape(-1)
 
         in_dims = (None,) + (0,) * len(batch)
-        jacobian = vmap(jacrev(one_sample), in_dims=in_dims)(flat, *batch)
-        return jacobian.reshape(-1, self.num_params)
+        jacobian = vmap(jacrev(one_sample), in_dims=in_dims)(flat, *batch).reshape(-1, self.num_params)
+        if self.weight_decay:
+            penalty = math.sqrt(self.weight_decay) * torch.eye(self.num_params, dtype=jacobian.dtype)
+            jacobian = torch.cat([jacobian, penalty])
+        return jacobian
 
     # -- the algorithm ------------------------------------------------------------------------
     def step(self, closure: ResidualClosure, *batch: Tensor, per_sample: bool = False) -> LMStepResult:
