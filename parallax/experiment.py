@@ -22,6 +22,7 @@ from omegaconf import DictConfig, OmegaConf
 
 import parallax.envs
 from parallax.metrics import position_label
+from parallax.policy.features import REFERENCE_MODE
 
 
 @dataclass
@@ -105,6 +106,16 @@ class Experiment:
     def _images(self, observations: list[dict], key: str) -> torch.Tensor:
         return torch.from_numpy(np.stack([o[key] for o in observations])).to(self.device)
 
+    @property
+    def uses_reference_states(self) -> bool:
+        """The policy sees θ(t) − θ_ref (``policy.feature_norm=difference``, beyond the paper)."""
+        return self.policy.feature_norm == REFERENCE_MODE
+
+    def reference_states(self, reference: torch.Tensor) -> torch.Tensor:
+        """θ_ref (B, state_dim): the pooled activity of (I0, I0), the stimulus at zero disparity,
+        with the current dictionaries and without learning (the coder's reference must be set)."""
+        return self.coder(reference, learn=False).state
+
     def run_presentation(self, learn: bool = True, greedy: bool = False,
                          keep_view: bool = False) -> Presentation:
         """All robots live through one presentation; learning on or frozen."""
@@ -116,21 +127,26 @@ class Experiment:
         self.coder.set_reference(self._images(obs, "reference"))
 
         prev_state = prev_action = None
+        reference_state = None
         reward_sum, error_sums, n_enc = 0.0, {}, 0
         stat_sums: dict[str, float] = {}
         n_updates = steps = 0
         while True:
+            iteration = int(obs[0]["iteration"])
+            if self.uses_reference_states and iteration == 0:
+                # once per trial, before this step's dictionary update (the dictionaries drift)
+                reference_state = self.reference_states(self._images(obs, "reference"))
             out = self.coder(self._images(obs, "image"), learn=learn)
             reward_sum += float(out.reward.mean())
             for scale, e in out.errors.items():
                 error_sums[scale] = error_sums.get(scale, 0.0) + float(e.mean())
             n_enc += 1
-            iteration = int(obs[0]["iteration"])
+            state = out.state if reference_state is None else out.state - reference_state
             # Robots move in lockstep, so they cross a trial boundary together; the transition into
             # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
             if learn and prev_state is not None and iteration > 0:
                 valid = torch.ones(B, dtype=torch.bool, device=self.device)
-                stats = self.policy.update(prev_state, prev_action, out.reward, out.state, valid)
+                stats = self.policy.update(prev_state, prev_action, out.reward, state, valid)
                 for k, v in stats.items():
                     stat_sums[k] = stat_sums.get(k, 0.0) + float(v)
                 n_updates += 1
@@ -140,11 +156,11 @@ class Experiment:
                 targets[:, p] = [float(o["target_pan"]) for o in obs]
             if timesteps[0].last():
                 break
-            action = self.policy.act(out.state, greedy=greedy)
+            action = self.policy.act(state, greedy=greedy)
             increments = self.policy.action_values[action].cpu().numpy()
             timesteps = [env.step(float(a)) for env, a in zip(self.envs, increments)]
             obs = [ts.observation for ts in timesteps]
-            prev_state, prev_action = out.state, action
+            prev_state, prev_action = state, action
             steps += 1
 
         view = None

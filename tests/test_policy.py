@@ -290,3 +290,24 @@ def test_bad_inputs_are_refused() -> None:
                       ("next_phi", torch.full((2, SMALL_DIM), float("nan")))]:
         with pytest.raises(ValueError, match=name):
             policy.update(**{**good, name: bad})
+
+
+def test_difference_features_vanish_at_the_reference_and_stay_bounded() -> None:
+    # feature_norm=difference (beyond the paper): states are θ(t) − θ_ref, so the zero state is
+    # "the view matches I0"; it must give φ = 0, a uniform π and a greedy step of 0.
+    policy = _policy(feature_norm="difference")
+    differences = _states(40, seed=46) - _states(40, seed=47)
+    policy.act(differences)
+    policy.eval()  # acting on the probes below must not move the running norm
+    mean_norm = float(differences.double().norm(dim=1).mean())
+    assert float(policy.normalizer.norm_mean) == pytest.approx(mean_norm, rel=1e-6)
+    policy.actor.normal_(generator=torch.Generator().manual_seed(0))
+    zero = torch.zeros(2, SMALL_DIM)
+    torch.testing.assert_close(policy.features(zero), zero)
+    torch.testing.assert_close(policy.probabilities(zero), torch.full((2, 7), 1 / 7))
+    assert policy.action_values[policy.act(zero, greedy=True)].tolist() == [0.0, 0.0]
+    features = policy.features(torch.cat([differences, 50 * differences]))
+    assert float(features.norm(dim=1).max()) <= 1 + 1e-6
+    # a difference smaller than the running mean norm is scaled, not stretched to unit length
+    small = differences[:1] * 0.01
+    torch.testing.assert_close(policy.features(small).double(), small.double() / mean_norm, rtol=1e-5, atol=0)

@@ -195,3 +195,16 @@ def test_resuming_with_other_settings_is_refused_and_loses_nothing(tmp_path, tin
     errors = [line for line in proc.stderr.splitlines() if line.startswith("parallax-train: error")]
     assert len(errors) == 1 and "coder.learning_rate: 0.01 → 0.3" in errors[0]
     assert all((run / name).read_bytes() == data for name, data in before.items())  # Hydra may add train.log
+
+
+def test_difference_states_train_and_resume_exactly(tmp_path, tiny_overrides):
+    # feature_norm=difference: one extra (I0, I0) encode per trial; still same seed, same numbers.
+    overrides = tiny_overrides + ["policy.feature_norm=difference"]
+    full = _train(tmp_path / "full", overrides)
+    _train(tmp_path / "part", overrides + ["train.presentations=4"])
+    resumed = _train(tmp_path / "part", overrides)
+    assert _without_timing(resumed) == _without_timing(full)
+    assert ((tmp_path / "part" / "metrics.jsonl").read_text()
+            == (tmp_path / "full" / "metrics.jsonl").read_text())
+    default = _train(tmp_path / "default", tiny_overrides)
+    assert _without_timing(default) != _without_timing(full)

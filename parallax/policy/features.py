@@ -10,7 +10,16 @@ of squared norm ≈ 0.02 whose direction is dominated by that common part. Three
 * ``zscore``        — per entry, minus a running mean, divided by a running standard deviation,
   and the whole vector divided by √state_dim so that E‖φ‖² ≈ 1: the published step sizes
   (α_v = 1 in particular) assume features of norm about one, and a plain z-score
-  (E‖φ‖² = state_dim) would make the critic's LMS step diverge.
+  (E‖φ‖² = state_dim) would make the critic's LMS step diverge;
+* ``centred_unit`` / ``zscore_unit`` — minus the running mean (and z-scored), then each state
+  scaled to unit norm;
+* ``difference``    — beyond the paper: the experiment hands over θ(t) − θ_ref, where θ_ref is
+  the pooled activity of the pair (I0, I0), i.e. of the same stimulus at zero disparity
+  (``Experiment.reference_states``). Each row is divided by max(‖row‖, running mean of ‖row‖):
+  ‖φ‖ ≤ 1 keeps the α_v = 1 critic step stable, and small differences stay small, so at the
+  target (I(t) ≈ I0, φ ≈ 0) the logits vanish for every texture and π has no preferred step.
+  The stimulus-specific part of θ, which otherwise shifts the policy's fixed point by a
+  texture-dependent offset, cancels in the difference.
 
 The running statistics (count, mean, sum of squared deviations, in float64) are buffers, so
 they travel with the state dict; they are updated only when asked (the policy does it for the
@@ -26,9 +35,11 @@ import math
 import torch
 from torch import nn
 
-FEATURE_NORMS = ("none", "l1_per_scale", "zscore", "centred_unit", "zscore_unit")
+FEATURE_NORMS = ("none", "l1_per_scale", "zscore", "centred_unit", "zscore_unit", "difference")
 # Modes that keep running statistics of the raw states.
-_RUNNING_MODES = ("zscore", "centred_unit", "zscore_unit")
+_RUNNING_MODES = ("zscore", "centred_unit", "zscore_unit", "difference")
+#: The mode whose states are differences from the zero-disparity reference θ_ref.
+REFERENCE_MODE = "difference"
 
 # Below these a per-scale L1 norm or a per-entry standard deviation counts as zero: such a block
 # or entry carries no information and is mapped to zero rather than amplified rounding noise
@@ -57,6 +68,9 @@ class FeatureNormalizer(nn.Module):
         self.register_buffer("count", torch.zeros((), dtype=torch.float64))
         self.register_buffer("mean", torch.zeros(state_dim, dtype=torch.float64))
         self.register_buffer("sum_sq_dev", torch.zeros(state_dim, dtype=torch.float64))
+        if mode == REFERENCE_MODE:
+            # running mean of ‖θ(t) − θ_ref‖; only this mode has it, so older checkpoints still load
+            self.register_buffer("norm_mean", torch.zeros((), dtype=torch.float64))
 
     def observe(self, states: torch.Tensor) -> None:
         """Adds a batch of raw states to the running statistics (Chan et al.'s batch merge)."""
@@ -74,6 +88,8 @@ class FeatureNormalizer(nn.Module):
             self.sum_sq_dev *= kept / float(self.count)
             self.count.fill_(kept)
         total = self.count + batch_count
+        if self.mode == REFERENCE_MODE:
+            self.norm_mean += (batch.norm(dim=1).mean() - self.norm_mean) * (batch_count / total)
         delta = batch_mean - self.mean
         self.mean += delta * (batch_count / total)
         self.sum_sq_dev += batch_sum_sq_dev + delta ** 2 * (self.count * batch_count / total)
@@ -88,6 +104,11 @@ class FeatureNormalizer(nn.Module):
             informative = l1 > _TINY_L1
             normalised = torch.where(informative, blocks / torch.where(informative, l1, 1.0), 0.0)
             return normalised.reshape(states.shape)
+        if self.mode == REFERENCE_MODE:
+            differences = states.to(self.mean.dtype)
+            norm = differences.norm(dim=1, keepdim=True)
+            scale = torch.maximum(norm, self.norm_mean.expand_as(norm))
+            return torch.where(scale > _TINY_L1, differences / scale.clamp(min=_TINY_L1), 0.0).to(states.dtype)
         centred = states.to(self.mean.dtype) - self.mean
         if self.mode == "centred_unit":
             return _unit_rows(centred).to(states.dtype)
