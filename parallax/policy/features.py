@@ -88,8 +88,10 @@ class FeatureNormalizer(nn.Module):
             self.sum_sq_dev *= kept / float(self.count)
             self.count.fill_(kept)
         total = self.count + batch_count
-        if self.mode == REFERENCE_MODE:
+        if self.mode == REFERENCE_MODE:  # only the mean norm is used; skip the per-entry statistics
             self.norm_mean += (batch.norm(dim=1).mean() - self.norm_mean) * (batch_count / total)
+            self.count.copy_(total)
+            return
         delta = batch_mean - self.mean
         self.mean += delta * (batch_count / total)
         self.sum_sq_dev += batch_sum_sq_dev + delta ** 2 * (self.count * batch_count / total)
