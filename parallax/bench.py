@@ -29,23 +29,78 @@ from parallax.timing import interleaved_medians_ms
 
 
 # --- the machine's limits ----------------------------------------------------------------------
-def machine_limits(threads: int) -> dict[str, float]:
-    """Measured float32 matmul throughput (GFLOP/s) and copy bandwidth (GB/s) at ``threads``."""
+def _synchronised(operation, device: str):
+    """``operation`` followed by a wait for the device, so host clocks time the device's work."""
+    if device == "cpu":
+        return operation
+    return lambda: (operation(), torch.cuda.synchronize())
+
+
+def machine_limits(threads: int, device: str = "cpu") -> dict[str, float]:
+    """Measured float32 matmul throughput (GFLOP/s) and copy bandwidth (GB/s) of ``device``
+    (the CPU at ``threads`` torch threads, or the GPU; full float32, TF32 off)."""
     previous = torch.get_num_threads()
     torch.set_num_threads(threads)
+    previous_tf32 = torch.backends.cuda.matmul.allow_tf32
+    torch.backends.cuda.matmul.allow_tf32 = False  # the coder's products are plain float32
     try:
-        n = 1024
-        a, b = torch.randn(n, n), torch.randn(n, n)
-        out = torch.empty(n, n)
-        ms = interleaved_medians_ms({"mm": lambda: torch.mm(a, b, out=out)}, repeats=20)["mm"]
+        n = 1024 if device == "cpu" else 8192
+        a, b = torch.randn(n, n, device=device), torch.randn(n, n, device=device)
+        out = torch.empty(n, n, device=device)
+        mm = _synchronised(lambda: torch.mm(a, b, out=out), device)
+        ms = interleaved_medians_ms({"mm": mm}, repeats=20)["mm"]
         gflops = 2 * n ** 3 / (ms * 1e-3) / 1e9
-        src = torch.ones(32 * 2 ** 20)  # 128 MiB: far beyond the caches
+        # 128 MiB on the CPU, 2 GiB on a GPU: far beyond the caches
+        src = torch.ones((32 if device == "cpu" else 512) * 2 ** 20, device=device)
         dst = torch.empty_like(src)
-        ms = interleaved_medians_ms({"copy": lambda: dst.copy_(src)}, repeats=10)["copy"]
+        copy = _synchronised(lambda: dst.copy_(src), device)
+        ms = interleaved_medians_ms({"copy": copy}, repeats=10)["copy"]
         gbps = 2 * src.numel() * 4 / (ms * 1e-3) / 1e9  # one read + one write per element
     finally:
         torch.set_num_threads(previous)
+        torch.backends.cuda.matmul.allow_tf32 = previous_tf32
     return {"matmul_gflops": gflops, "copy_gbps": gbps}
+
+
+def cuda_components(repeats: int) -> dict[str, float]:
+    """Median ms of the coder (encode + dictionary update, both scales), the policy's act +
+    update and one LM epoch on the GPU, each followed by a device synchronisation."""
+    from parallax.coding.benchmark import _coder, _frames
+    from parallax.distance.benchmark import _paper_sized_learner
+    from parallax.distance.learner import _regression_residuals
+    from parallax.policy.benchmark import NUM_SCALES, STATE_DIM, _pooled_activities
+    from parallax.policy.natural_actor_critic import NaturalActorCritic
+
+    operations = {}
+    for batch in (1, 16, 64):
+        references, currents = _frames(batch)
+        coder = _coder("gram", True, ["coarse", "fine"]).to("cuda")
+        coder.set_reference(references)
+        current = torch.from_numpy(currents).to("cuda")
+        operations[f"encode_update_both_B{batch}_ms"] = _synchronised(
+            lambda coder=coder, current=current: coder(current), "cuda")
+    for batch in (1, 16, 64):
+        policy = NaturalActorCritic(STATE_DIM, NUM_SCALES, seed=0).to("cuda")
+        generator = torch.Generator().manual_seed(0)
+        states = _pooled_activities(batch, generator).to("cuda")
+        rewards = -torch.rand(batch, generator=generator).to("cuda")
+        valid = torch.ones(batch, dtype=torch.bool, device="cuda")
+
+        def act_update(policy=policy, states=states, rewards=rewards, valid=valid) -> None:
+            action = policy.act(states)
+            policy.update(states, action, rewards, states, valid)
+        operations[f"policy_act_update_B{batch}_ms"] = _synchronised(act_update, "cuda")
+    learner = _paper_sized_learner().to("cuda")
+    optimizer = learner.optimizer
+    inputs, targets = learner.queue.inputs * learner.weights, learner.queue.targets
+    start, start_mu = optimizer._flat().clone(), optimizer.mu
+
+    def lm_epoch() -> None:
+        optimizer._write(start)
+        optimizer.mu = start_mu
+        optimizer.step(_regression_residuals, inputs, targets, per_sample=True)
+    operations["lm_epoch_ms"] = _synchronised(lm_epoch, "cuda")
+    return interleaved_medians_ms(operations, repeats, warmup=5)
 
 
 def coder_work_per_frame(cfg) -> dict[str, float]:
@@ -108,6 +163,8 @@ def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1,
             "policy": policy_bench.run(repeats),
             "distance": distance_bench.run(max(5, repeats // 3)),
         }
+        if torch.cuda.is_available():
+            report["components_ms"]["cuda"] = cuda_components(repeats)
         torch.set_num_threads(threads)  # component benchmarks may change it
     # A short multi-position curriculum: 6 positions × 30 iterations per presentation.
     overrides = ["curriculum=multi_5_10", f"train.threads={threads}"]
@@ -116,10 +173,13 @@ def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1,
         dev: {f"B={b}": end_to_end(b, presentations, dev, overrides) for b in robots} for dev in devices}
     cfg = compose(overrides)
     work = coder_work_per_frame(cfg)
-    limits = machine_limits(threads)
-    bound_ms = max(work["flops"] / (limits["matmul_gflops"] * 1e9),
-                   work["bytes"] / (limits["copy_gbps"] * 1e9)) * 1e3
-    report["roofline"] = {**limits, **work, "coder_bound_ms_per_frame": bound_ms}
+    report["roofline"] = {}
+    for dev in devices:
+        limits = machine_limits(threads, dev)
+        bound_ms = max(work["flops"] / (limits["matmul_gflops"] * 1e9),
+                       work["bytes"] / (limits["copy_gbps"] * 1e9)) * 1e3
+        report["roofline"][dev] = {**limits, **work, "coder_bound_ms_per_frame": bound_ms}
+    rf = report["roofline"]["cpu"]
     coder = report.get("components_ms", {}).get("coder", {})
     # What the coder runs by default, and each Gram-form implementation (compiled kernels and
     # the numpy/torch fallback) measured beside it.
@@ -127,11 +187,16 @@ def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1,
                       ("coder_cpp_measured_over_bound", "encode_update_both_B1_gram_cpp_ms"),
                       ("coder_torch_measured_over_bound", "encode_update_both_B1_gram_torch_ms")):
         if coder.get(name):
-            report["roofline"][key] = coder[name] / bound_ms
+            rf[key] = coder[name] / rf["coder_bound_ms_per_frame"]
+    on_gpu = report.get("components_ms", {}).get("cuda", {})
+    for batch in (1, 16, 64):
+        if on_gpu.get(f"encode_update_both_B{batch}_ms"):
+            report["roofline"]["cuda"][f"coder_B{batch}_measured_over_bound"] = (
+                on_gpu[f"encode_update_both_B{batch}_ms"] / batch / report["roofline"]["cuda"]["coder_bound_ms_per_frame"])
     for dev, by_b in report["end_to_end"].items():
         for b, r in by_b.items():
             per_frame = r["lockstep_ms"] / int(b.split("=")[1])
-            r["step_over_coder_bound"] = per_frame / bound_ms
+            r["step_over_coder_bound"] = per_frame / report["roofline"][dev]["coder_bound_ms_per_frame"]
     return report
 
 
@@ -147,16 +212,20 @@ def format_report(report: dict) -> str:
         for b, r in by_b.items():
             lines.append(f"  {dev} {b:<6} {r['steps_per_second']:>8.1f} steps/s   "
                          f"lockstep {r['lockstep_ms']:.2f} ms   ×{r['step_over_coder_bound']:.1f} of the coder bound")
-    rf = report["roofline"]
-    lines.append(f"[roofline] matmul {rf['matmul_gflops']:.1f} GFLOP/s, copy {rf['copy_gbps']:.1f} GB/s; "
-                 f"coder per frame {rf['flops'] / 1e6:.1f} MFLOP, {rf['bytes'] / 1e6:.1f} MB "
-                 f"→ bound {rf['coder_bound_ms_per_frame']:.3f} ms")
-    if "coder_measured_over_bound" in rf:
-        variants = [f"{label} ×{rf[key]:.1f}" for key, label in (
-            ("coder_cpp_measured_over_bound", "compiled kernels"),
-            ("coder_torch_measured_over_bound", "numpy/torch loop")) if key in rf]
-        lines.append(f"  coder measured / bound: ×{rf['coder_measured_over_bound']:.1f}"
-                     + (f" ({', '.join(variants)})" if variants else ""))
+    for dev, rf in report["roofline"].items():
+        lines.append(f"[roofline {dev}] matmul {rf['matmul_gflops']:.1f} GFLOP/s, copy {rf['copy_gbps']:.1f} GB/s; "
+                     f"coder per frame {rf['flops'] / 1e6:.1f} MFLOP, {rf['bytes'] / 1e6:.1f} MB "
+                     f"→ bound {rf['coder_bound_ms_per_frame']:.4f} ms")
+        if "coder_measured_over_bound" in rf:
+            variants = [f"{label} ×{rf[key]:.1f}" for key, label in (
+                ("coder_cpp_measured_over_bound", "compiled kernels"),
+                ("coder_torch_measured_over_bound", "numpy/torch loop")) if key in rf]
+            lines.append(f"  coder measured / bound: ×{rf['coder_measured_over_bound']:.1f}"
+                         + (f" ({', '.join(variants)})" if variants else ""))
+        gpu = [f"B={b} ×{rf[f'coder_B{b}_measured_over_bound']:.1f}" for b in (1, 16, 64)
+               if f"coder_B{b}_measured_over_bound" in rf]
+        if gpu:
+            lines.append(f"  coder measured per frame / bound: {', '.join(gpu)}")
     return "\n".join(lines)
 
 

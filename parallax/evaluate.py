@@ -69,10 +69,13 @@ def distance_results(learner, pans: np.ndarray, distances: np.ndarray) -> dict:
 
 def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | None = None,
              between: list[float] | None = None, perturbation: str = "auto",
-             out: str | Path | None = None, checkpoint_name: str = checkpoint.CHECKPOINT_NAME) -> dict:
+             out: str | Path | None = None, checkpoint_name: str = checkpoint.CHECKPOINT_NAME,
+             device: str | None = None) -> dict:
     run_dir = Path(run_dir)
     out_dir = Path(out) if out else run_dir
     cfg = load_run_config(run_dir)
+    if device is not None:  # e.g. a run trained on a GPU, evaluated on a machine without one
+        cfg.device = device
     if int(cfg.train.threads) > 0:
         # as in training: a second intra-op thread made a loaded 2-core machine ~30× slower
         torch.set_num_threads(int(cfg.train.threads))
@@ -176,11 +179,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--checkpoint", default=checkpoint.CHECKPOINT_NAME,
                         help=f"checkpoint file in the run dir (default {checkpoint.CHECKPOINT_NAME}; "
                              f"{checkpoint.BEFORE_PERTURBATION_NAME} for the state before §5's perturbation)")
+    parser.add_argument("--device", default=None,
+                        help="cpu or cuda (default: the device the run was trained on)")
     args = parser.parse_args(argv)
     try:
         result = evaluate(args.run_dir, textures=args.textures, distances=args.distances,
                           between=args.between, perturbation=args.perturbation, out=args.out,
-                          checkpoint_name=args.checkpoint)
+                          checkpoint_name=args.checkpoint, device=args.device)
     except (FileNotFoundError, ValueError) as exc:
         print(f"parallax-eval: error: {exc}", file=sys.stderr)
         sys.exit(2)

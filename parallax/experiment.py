@@ -82,7 +82,7 @@ class Experiment:
                                   seed=seeds[self.robots + 1]).to(self.device)
         self.distance = instantiate(cfg.distance, lateral_positions=self.lateral_positions,
                                     seed=seeds[self.robots + 2])
-        if isinstance(self.distance, torch.nn.Module):
+        if hasattr(self.distance, "to"):  # DistanceLearner.to, or an nn.Module
             self.distance.to(self.device)
         self.stage = 0
 

@@ -74,7 +74,7 @@ class Trainer:
         """Continue from the run directory's checkpoint, if any; drop log lines written after it."""
         if not self.checkpoint_path.exists():
             return False
-        state = checkpoint.load(self.checkpoint_path, map_location=self.exp.device)
+        state = checkpoint.load(self.checkpoint_path, map_location="cpu")  # load_state_dict copies onto the run's device
         self.exp.load_state_dict(state["experiment"])
         self.eye.load_state_dict(state["eye"])
         self.dist.load_state_dict(state["dist"])

@@ -57,10 +57,10 @@ def consistent_mask(inputs: Tensor, targets: Tensor, mads: float, neighbours: in
     """
     count = inputs.shape[0]
     if count < int(neighbours) + 2:
-        return torch.ones(count, dtype=torch.bool)
+        return torch.ones(count, dtype=torch.bool, device=inputs.device)
     deviation = neighbour_deviation(inputs, targets, neighbours)
     centre = deviation.median()
     spread = MAD_TO_SD * (deviation - centre).abs().median()
     if not bool(spread > 0):
-        return torch.ones(count, dtype=torch.bool)
+        return torch.ones(count, dtype=torch.bool, device=inputs.device)
     return deviation <= centre + float(mads) * spread

@@ -91,7 +91,7 @@ class DistanceLearner:
 
     def _as_inputs(self, s: "Tensor | np.ndarray | Sequence[float]") -> Tensor:
         inputs = torch.as_tensor(np.asarray(s, dtype=np.float64) if not isinstance(s, Tensor) else s)
-        inputs = inputs.detach().to(torch.float64)
+        inputs = inputs.detach().to(device=self.weights.device, dtype=torch.float64)
         if inputs.shape[-1:] != self.weights.shape or inputs.dim() > 2:
             raise ValueError(f"pans must have shape (r,) or (n, r) with r={self.weights.numel()}, got {tuple(inputs.shape)}")
         if not bool(torch.isfinite(inputs).all()):
@@ -149,7 +149,17 @@ class DistanceLearner:
         inputs = self._as_inputs(S)
         with torch.no_grad():
             distances = self.network(inputs * self.weights)
-        return distances if isinstance(S, Tensor) else distances.numpy()
+        return distances.to(S.device) if isinstance(S, Tensor) else distances.cpu().numpy()
+
+    def to(self, device: "torch.device | str") -> "DistanceLearner":
+        """Moves the network, the queue and the input weights to ``device`` (in place; returns self).
+
+        Fits then run there; ``observe`` and ``predict`` accept inputs on any device.
+        """
+        self.weights = self.weights.to(device)
+        self.network.to(device)  # parameters keep their identity, so the optimizer still holds them
+        self.queue.to(device)
+        return self
 
     def state_dict(self) -> dict[str, object]:
         """Everything needed to resume bit-identically (tensors are copies)."""
@@ -173,7 +183,7 @@ class DistanceLearner:
                  "hidden": self.network.hidden_layer.out_features}
         if state["shape"] != shape:
             raise ValueError(f"distance learner state is for {state['shape']!r}, this learner is {shape!r}")
-        if not torch.equal(torch.as_tensor(state["weights"]), self.weights):
+        if not torch.equal(torch.as_tensor(state["weights"]).cpu(), self.weights.cpu()):
             raise ValueError(f"state was saved with input weights {state['weights']!r}, this learner uses "
                              f"{self.weights!r} (different L, y or sensitivity)")
         self.network.load_state_dict(state["network"])  # type: ignore[arg-type]

@@ -137,7 +137,7 @@ class LevenbergMarquardt:
         in_dims = (None,) + (0,) * len(batch)
         jacobian = vmap(jacrev(one_sample), in_dims=in_dims)(flat, *batch).reshape(-1, self.num_params)
         if self.weight_decay:
-            penalty = math.sqrt(self.weight_decay) * torch.eye(self.num_params, dtype=jacobian.dtype)
+            penalty = math.sqrt(self.weight_decay) * torch.eye(self.num_params, dtype=jacobian.dtype, device=jacobian.device)
             jacobian = torch.cat([jacobian, penalty])
         return jacobian
 
@@ -221,7 +221,7 @@ class _DampedSolver:
         self.jacobian, self.errors, self.gradient = jacobian, errors, gradient
         self.dual = jacobian.shape[0] < jacobian.shape[1]
         self.gram = jacobian @ jacobian.T if self.dual else jacobian.T @ jacobian
-        self.eye = torch.eye(self.gram.shape[0], dtype=self.gram.dtype)
+        self.eye = torch.eye(self.gram.shape[0], dtype=self.gram.dtype, device=self.gram.device)
 
     def __call__(self, mu: float) -> Tensor | None:
         """The step for this μ, or None when the factorisation fails or the step is not finite."""

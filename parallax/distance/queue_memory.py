@@ -49,9 +49,14 @@ class QueueMemory:
         """S of eq. (9), (r, fill): column k−1 is s_k."""
         return self.inputs.T
 
+    def to(self, device: "torch.device | str") -> "QueueMemory":
+        """Moves the stored vectors and targets to ``device`` (in place; returns self)."""
+        self._inputs, self._targets = self._inputs.to(device), self._targets.to(device)
+        return self
+
     def push(self, s: Tensor, target: float) -> None:
         """Queue ``s`` as s_1 with its target; drop s_c when full."""
-        s = torch.as_tensor(s, dtype=self._inputs.dtype)
+        s = torch.as_tensor(s, dtype=self._inputs.dtype, device=self._inputs.device)
         if s.shape != self._inputs.shape[1:]:
             raise ValueError(f"s must have shape ({self._inputs.shape[1]},), got {tuple(s.shape)}")
         if not math.isfinite(float(target)):

@@ -283,7 +283,8 @@ class NaturalActorCritic(nn.Module):
     def set_extra_state(self, state: dict[str, Any]) -> None:
         if not isinstance(state, dict) or "generator" not in state:
             raise ValueError("policy state dict lacks the sampling generator's state")
-        self._generator.set_state(state["generator"])
+        # a checkpoint loaded with map_location=cuda brings this CPU generator's state along
+        self._generator.set_state(state["generator"].cpu())
 
     def extra_repr(self) -> str:
         return (f"state_dim={self.state_dim}, actions={self.action_values.tolist()}, "
