@@ -96,13 +96,16 @@ class DistanceErrorTracker:
 def learn_online(learner, tracker: DistanceErrorTracker, pans: np.ndarray,
                  distances: np.ndarray) -> dict[str, float]:
     """Paper §3.5 online: predict each new s before learning it (the honest online error, kept by
-    `tracker`), then queue it (eq. 9) and fit. Returns the last fit's statistics ({} if none).
-    Shared by the trainer and parallax-replay so that a replay is the run's distance learner."""
-    last: dict[str, float] = {}
-    for s, d in zip(pans, distances):
-        if learner.is_ready:
-            tracker.record(float(np.asarray(learner.predict(np.asarray(s)[None, :])).reshape(-1)[0]), float(d))
-        stats = learner.observe(np.asarray(s, dtype=np.float64), float(d))
-        if stats:
-            last = {k: float(v) for k, v in stats.items()}
-    return last
+    `tracker`), then queue it (eq. 9) and fit. The rows of ``pans`` are one presentation's
+    vectors, one per robot: all are predicted, then queued, then fitted once (with one robot,
+    exactly the paper's loop; see ``DistanceLearner.observe_batch``). Returns the fit's
+    statistics ({} if none). Shared by the trainer and parallax-replay so that a replay is the
+    run's distance learner."""
+    pans = np.atleast_2d(np.asarray(pans, dtype=np.float64))
+    distances = np.asarray(distances, dtype=np.float64).reshape(-1)
+    if learner.is_ready:
+        predictions = np.asarray(learner.predict(pans), dtype=np.float64).reshape(-1)
+        for predicted, d in zip(predictions, distances):
+            tracker.record(float(predicted), float(d))
+    stats = learner.observe_batch(pans, [float(d) for d in distances])
+    return {k: float(v) for k, v in stats.items()} if stats else {}

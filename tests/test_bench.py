@@ -27,6 +27,8 @@ def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
     assert "[end to end]" in printed and "[roofline cpu]" in printed
     report = json.loads(out.read_text())
     assert report["end_to_end"]["cpu"]["B=1"]["steps_per_second"] > 0
+    # the trainer's whole step, with the distance learner fitting a full queue at every s
+    assert report["end_to_end"]["cpu"]["B=1"]["trainer_steps_per_second"] > 0
     cpu = report["roofline"]["cpu"]
     assert cpu["coder_bound_ms_per_frame"] > 0
     assert cpu["matmul_gflops"] > 0 and cpu["copy_gbps"] > 0

@@ -117,6 +117,28 @@ def test_training_starts_when_the_queue_is_full():
         small_learner().predict(pans)
 
 
+def test_a_batch_of_vectors_is_queued_in_order_then_fitted_once():
+    pans, distances = paper_regression(56, np.random.default_rng(2), lateral_positions_m=SMALL_L)
+    one_by_one, batched = small_learner(), small_learner()
+    feed(one_by_one, pans[:40], distances[:40])
+    feed(batched, pans[:40], distances[:40])
+    for start in (40, 48):  # two lockstep batches of B = 8 robots
+        feed(one_by_one, pans[start:start + 8], distances[start:start + 8])
+        stats = batched.observe_batch(pans[start:start + 8], distances[start:start + 8])
+        assert stats["trained"] == 1.0
+    assert torch.equal(batched.queue.inputs, one_by_one.queue.inputs)
+    assert batched.fits == 3 and one_by_one.fits == 17 and batched.observations == 56
+    # B = 1 is the paper's loop: observe_batch of one row is observe, bit for bit
+    single, same = small_learner(), small_learner()
+    for s, d in zip(pans, distances):
+        single.observe(s, d)
+        same.observe_batch(s[None, :], [d])
+    for name, value in single.network.state_dict().items():
+        assert torch.equal(same.network.state_dict()[name], value)
+    with pytest.raises(ValueError, match="n distances"):
+        same.observe_batch(pans[:3], distances[:2])
+
+
 def test_learns_the_paper_regression():
     pans, distances = paper_regression(300, np.random.default_rng(0))
     learner = DistanceLearner(PAPER_LATERAL_POSITIONS_M, queue_size=300, hidden=30, initial_epochs=60, seed=0)

@@ -101,21 +101,41 @@ class DistanceLearner:
     def observe(self, s: "Tensor | np.ndarray | Sequence[float]", distance: float) -> dict[str, float]:
         """Queue (s, target from ``distance``); fit once the queue is full. Returns floats:
 
-        trained (0/1), loss (MSE in m² over the queue after the fit; NaN before the first fit),
-        rmse_m, epochs (accepted LM steps), mu, grad_norm (‖Jᵀe‖ at the last epoch), stopped_min_grad,
-        stopped_mu_max, stopped_non_finite (0/1), queue_fill and outliers (queued vectors the fit
-        left out, see ``parallax.distance.consistency``; always 0 with ``outlier_mads`` null).
+        trained (0/1), loss (MSE in m² over the vectors the fit used, after the fit; NaN before
+        the first fit), rmse_m, epochs (accepted LM steps), mu, grad_norm (‖Jᵀe‖ at the last
+        epoch), stopped_min_grad, stopped_mu_max, stopped_non_finite (0/1), queue_fill and
+        outliers (queued vectors the fit left out, see ``parallax.distance.consistency``; always
+        0 with ``outlier_mads`` null).
         """
         inputs = self._as_inputs(s)
         if inputs.dim() != 1:
             raise ValueError(f"observe takes one vector s of shape ({self.weights.numel()},), got {tuple(inputs.shape)}")
-        self.queue.push(inputs, self.target_source(inputs, distance))
-        self.observations += 1
+        return self.observe_batch(inputs[None, :], [distance])
+
+    def observe_batch(self, S: "Tensor | np.ndarray | Sequence[Sequence[float]]",
+                      distances: Sequence[float]) -> dict[str, float]:
+        """Queue the rows of S in order (as ``observe`` would, one by one), then fit once.
+
+        B robots in lockstep give B vectors s at a time; one fit for all of them is the distance
+        learner's counterpart of the policy's mean update and the dictionaries' single step.
+        With one row this is exactly ``observe``. Returns the same statistics.
+        """
+        inputs = self._as_inputs(S)
+        if inputs.dim() != 2 or inputs.shape[0] != len(distances):
+            raise ValueError(f"observe_batch takes S of shape (n, {self.weights.numel()}) and n distances, "
+                             f"got {tuple(inputs.shape)} and {len(distances)}")
+        for row, distance in zip(inputs, distances):
+            self.queue.push(row, self.target_source(row, distance))
+            self.observations += 1
         stats = {"trained": 0.0, "loss": math.nan, "rmse_m": math.nan, "epochs": 0.0, "mu": self.optimizer.mu,
                  "grad_norm": math.nan, "stopped_min_grad": 0.0, "stopped_mu_max": 0.0,
                  "stopped_non_finite": 0.0, "queue_fill": float(self.queue.fill), "outliers": 0.0}
         if not self.queue.is_full:
             return stats
+        return {**stats, **self._fit()}
+
+    def _fit(self) -> dict[str, float]:
+        """Fits the network to the queue (§3.5.2); the statistics ``observe`` documents."""
         if self.optimizer.mu > self.optimizer.mu_max:
             self.optimizer.mu = self.optimizer.initial_mu
         inputs, targets = self.queue.inputs, self.queue.targets
@@ -131,12 +151,11 @@ class DistanceLearner:
         if self.optimizer.weight_decay:  # result.sse holds λ‖w‖² too; report the data's error only
             with torch.no_grad():
                 mse = float(_regression_residuals(self.network, weighted, targets).square().mean())
-        stats.update(trained=1.0, loss=mse, rmse_m=math.sqrt(mse), epochs=float(result.epochs), mu=result.mu,
-                     grad_norm=result.grad_norm, stopped_min_grad=float(result.stop == "min_grad"),
-                     stopped_mu_max=float(result.stop == "mu_max"),
-                     stopped_non_finite=float(result.stop == "non_finite_jacobian"),
-                     outliers=float(self.queue.fill - targets.numel()))
-        return stats
+        return dict(trained=1.0, loss=mse, rmse_m=math.sqrt(mse), epochs=float(result.epochs), mu=result.mu,
+                    grad_norm=result.grad_norm, stopped_min_grad=float(result.stop == "min_grad"),
+                    stopped_mu_max=float(result.stop == "mu_max"),
+                    stopped_non_finite=float(result.stop == "non_finite_jacobian"),
+                    outliers=float(self.queue.fill - targets.numel()))
 
     def predict(self, S: "Tensor | np.ndarray | Sequence[Sequence[float]]") -> "Tensor | np.ndarray":
         """(n, r) pans in degrees → (n,) metres (or (r,) → a scalar), weighted as in training.
