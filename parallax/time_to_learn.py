@@ -89,13 +89,23 @@ def recent_mae_per_position(run_dir: str | Path, trials: int = 100) -> list[dict
 
 def last_trials_spread(run_dir: str | Path, trials: int = 100, runaway_deg: float = 1.0) -> dict:
     """Per position, over the last ``trials`` trials before the perturbation: mean (Tables 2–3),
-    median, and the share of trials off by more than ``runaway_deg`` — a mean far above the
-    median means a few runaway trials, not a uniformly imprecise eye."""
+    median, the share of trials off by more than ``runaway_deg`` — a mean far above the median
+    means a few runaway trials, not a uniformly imprecise eye — and which way the runaways went:
+    ``past_share`` of them ended beyond the target (the pan past α*, seen from the start at 0),
+    ``runaway_signed_mean`` their mean error in that sense (positive: past the target, negative:
+    short of it or the wrong way)."""
     table = trial_errors(run_dir)
     tail = table["errors"][-trials:]
-    return {k: {"mean": float(tail[:, p].mean()), "median": float(np.median(tail[:, p])),
-                "runaway_share": float((tail[:, p] > runaway_deg).mean()), "trials": int(tail.shape[0])}
-            for p, k in enumerate(table["labels"])}
+    # + when the eye went past α*, − when it stopped short or turned the wrong way
+    past = ((table["pans"] - table["targets"]) * np.sign(table["targets"]))[-trials:]
+    spread = {}
+    for p, k in enumerate(table["labels"]):
+        runaway = tail[:, p] > runaway_deg
+        spread[k] = {"mean": float(tail[:, p].mean()), "median": float(np.median(tail[:, p])),
+                     "runaway_share": float(runaway.mean()), "trials": int(tail.shape[0]),
+                     "past_share": float((past[runaway, p] > 0).mean()) if runaway.any() else float("nan"),
+                     "runaway_signed_mean": float(past[runaway, p].mean()) if runaway.any() else float("nan")}
+    return spread
 
 
 def _wall_clock(run_dir: Path) -> dict[int, float]:
@@ -200,6 +210,11 @@ def main(argv: list[str] | None = None) -> int:
             print("  last trials before the perturbation, per position: "
                   + "  ".join(f"{k} cm {v['mean']:.2f}/{v['median']:.2f}°/{100 * v['runaway_share']:.0f}%"
                               for k, v in spread.items()) + "   (mean/median/share > 1°)")
+            runaways = {k: v for k, v in spread.items() if v["runaway_share"] > 0}
+            if runaways:
+                print("  runaways past the target / their mean signed error (+ past α*, − short or the wrong way): "
+                      + "  ".join(f"{k} cm {100 * v['past_share']:.0f}%/{v['runaway_signed_mean']:+.2f}°"
+                                  for k, v in runaways.items()))
     if args.curves:
         print(f"curves: {plot_learning_curves(args.runs, args.curves, args.trials)}")
     if args.json:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from parallax import time_to_learn as ttl
@@ -61,6 +62,13 @@ def test_spread_mean_is_the_tables_mean_and_counts_runaways(tiny_run):
         assert v["runaway_share"] == 1.0          # every trial is off by more than 0°
     none_off = ttl.last_trials_spread(tiny_run, trials=3, runaway_deg=1e9)
     assert all(v["runaway_share"] == 0.0 for v in none_off.values())
+    assert all(np.isnan(v["past_share"]) for v in none_off.values())
+    # which way each trial went, from the logged pans and the world's α*
+    table = ttl.trial_errors(tiny_run)
+    past = (table["pans"] - table["targets"])[-3:] * np.sign(table["targets"][-3:])
+    for p, v in enumerate(spread.values()):
+        assert v["past_share"] == pytest.approx((past[:, p] > 0).mean())
+        assert v["runaway_signed_mean"] == pytest.approx(past[:, p].mean())
 
 
 def test_learning_curve_counts_robot_iterations_and_plots(tiny_run, tmp_path):
