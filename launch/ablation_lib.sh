@@ -16,6 +16,9 @@
 #                                $SWEEP_ROOT/ablation_distance_source.
 #   px_replay OUT ARGS...        parallax-replay the distance sources into OUT with distance.* ARGS
 #                                (the part before any perturbation: Table 4's models).
+#   px_runs_with SWEEP_DIR OVERRIDE   the run folders of SWEEP_DIR launched with OVERRIDE, one per
+#                                line, read from their .hydra/overrides.yaml (a long run name is
+#                                shortened with a hash, so a glob on names can miss runs).
 # Environment:
 #   LAUNCHER=joblib        Hydra launcher: joblib (default, this machine), submitit_local, slurm,
 #                          or your git-ignored local_<site> config (see conf/hydra/launcher/slurm.yaml)
@@ -120,6 +123,15 @@ px_distance_source() {
   fi
   distance_sources=("$(px_sweep_dir ablation_distance_source)")
   px_sweep "${distance_sources[0]}" "seed=${SEEDS:-0,1,2}" "$@"
+}
+
+px_runs_with() {
+  local overrides
+  for overrides in "$1"/*/.hydra/overrides.yaml; do
+    if [[ -f "$overrides" ]] && grep -qxF -- "- $2" "$overrides"; then
+      dirname "$(dirname "$overrides")"
+    fi
+  done
 }
 
 px_replay() {

@@ -12,7 +12,13 @@ here="$(dirname "${BASH_SOURCE[0]}")"
 status=0
 read -ra scales_args <<< "${SCALES_ARGS:-train.presentations=60}"
 PARALLAX_EVAL="${PARALLAX_EVAL:-0}" bash "$here/ablation_scales.sh" "${scales_args[@]}" || status=$?
-export SOURCE="${SOURCE:-${SWEEP_ROOT:-outputs/multirun}/reproduce/*experiment=paper_multi_5_20_weighted*}"
+if [[ -z "${SOURCE:-}" ]]; then
+  # shellcheck disable=SC1091
+  source "$here/ablation_lib.sh"
+  SOURCE="$(px_runs_with "$(px_sweep_dir reproduce)" experiment=paper_multi_5_20_weighted | tr '\n' ' ')"
+  # the committed ablations.md replayed the session-3 runs (now outputs/multirun/s4_reproduce)
+  export SOURCE="${SOURCE:-$(px_sweep_dir reproduce)/<runs with experiment=paper_multi_5_20_weighted>}"
+fi
 bash "$here/ablation_y.sh" || status=$?
 bash "$here/ablation_queue.sh" || status=$?
 if [[ -z "${PARALLAX_DRY_RUN:-}" ]]; then
