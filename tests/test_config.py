@@ -83,7 +83,9 @@ def test_a_run_saved_before_a_setting_existed_has_that_settings_old_value():
     saved = OmegaConf.create(OmegaConf.to_container(current))
     del saved.distance.lm["weight_decay"]
     del saved.distance["outlier_mads"]
-    assert set(SETTINGS_ADDED_LATER) == {"distance.lm.weight_decay", "distance.outlier_mads"}
+    del saved.env["initial_pan_jitter_deg_per_m"]
+    assert set(SETTINGS_ADDED_LATER) == {"distance.lm.weight_decay", "distance.outlier_mads",
+                                         "env.initial_pan_jitter_deg_per_m"}
     assert changed_settings(saved, current) == []
     assert changed_settings(saved, compose(["distance.lm.weight_decay=0.01"])) == [
         "distance.lm.weight_decay: 0.0 → 0.01"]

@@ -78,7 +78,7 @@ class LateralPursuitTask(base.Task):
     def __init__(self, lateral_positions: Sequence[float], trial_length: int,
                  distances: tuple[float, ...], num_textures: int, pan_reset: bool = True,
                  max_pan_increment_deg: float = max(ACTION_SET_DEG), random: Any = None,
-                 initial_pan_jitter_deg: float = 0.0):
+                 initial_pan_jitter_deg: float = 0.0, initial_pan_jitter_deg_per_m: float = 0.0):
         super().__init__(random=random)
         if isinstance(trial_length, bool) or not isinstance(trial_length, (int, np.integer)) or trial_length < 2:
             raise ValueError(f"trial_length={trial_length!r}: expected an integer ≥ 2 (t_h iterations per position)")
@@ -90,7 +90,13 @@ class LateralPursuitTask(base.Task):
         if isinstance(initial_pan_jitter_deg, bool) or not isinstance(initial_pan_jitter_deg, (int, float)) \
                 or not (math.isfinite(initial_pan_jitter_deg) and initial_pan_jitter_deg >= 0):
             raise ValueError(f"initial_pan_jitter_deg={initial_pan_jitter_deg!r}: expected a number ≥ 0 (degrees)")
+        if isinstance(initial_pan_jitter_deg_per_m, bool) \
+                or not isinstance(initial_pan_jitter_deg_per_m, (int, float)) \
+                or not (math.isfinite(initial_pan_jitter_deg_per_m) and initial_pan_jitter_deg_per_m >= 0):
+            raise ValueError(f"initial_pan_jitter_deg_per_m={initial_pan_jitter_deg_per_m!r}: expected a number ≥ 0 "
+                             "(degrees per metre of lateral step)")
         self._initial_pan_jitter = float(initial_pan_jitter_deg)
+        self._initial_pan_jitter_per_m = float(initial_pan_jitter_deg_per_m)
         self._pending_positions = check_lateral_positions(lateral_positions)
         self._episode_positions = self._pending_positions
         self._trial_length = int(trial_length)
@@ -176,7 +182,7 @@ class LateralPursuitTask(base.Task):
         reference.setflags(write=False)
         self._reference = reference
         physics.set_lateral_position(self._episode_positions[0])
-        physics.set_pan_deg(self._trial_start_pan())
+        physics.set_pan_deg(self._trial_start_pan(self._episode_positions[0]))
         self._position_index = 0
         self._iteration = 0
 
@@ -191,15 +197,18 @@ class LateralPursuitTask(base.Task):
         self._iteration = 0
         physics.set_lateral_position(self._episode_positions[self._position_index])
         if self._pan_reset:
-            physics.set_pan_deg(self._trial_start_pan())
+            physics.set_pan_deg(self._trial_start_pan(self._episode_positions[self._position_index]))
 
-    def _trial_start_pan(self) -> float:
-        """The pan a trial starts from: 0 (the paper), or uniform in ±initial_pan_jitter_deg so
-        that the eye also learns from the far side of the target (beyond the paper). With no
-        jitter nothing is drawn, so the random stream is the paper setting's."""
-        if self._initial_pan_jitter == 0.0:
+    def _trial_start_pan(self, lateral_m: float) -> float:
+        """The pan a trial starts from: 0 (the paper), or uniform in ±(initial_pan_jitter_deg +
+        initial_pan_jitter_deg_per_m·|l|) so that the eye also learns from the far side of the
+        target (beyond the paper). The part in proportion to the lateral step l keeps the start
+        near the target where α* is small (short steps). With no jitter nothing is drawn, so the
+        random stream is the paper setting's."""
+        jitter = self._initial_pan_jitter + self._initial_pan_jitter_per_m * abs(float(lateral_m))
+        if jitter == 0.0:
             return 0.0
-        return float(self.random.uniform(-self._initial_pan_jitter, self._initial_pan_jitter))
+        return float(self.random.uniform(-jitter, jitter))
 
     def _pan_increment(self, action: Any) -> float:
         value = np.asarray(action, dtype=np.float64)
@@ -270,7 +279,8 @@ def load(seed: int | None = None,
          rotation_axis: str | Sequence[float] = "optical",
          blur_sigma: float = 0.0,
          max_pan_increment_deg: float = max(ACTION_SET_DEG),
-         initial_pan_jitter_deg: float = 0.0) -> PursuitEnvironment:
+         initial_pan_jitter_deg: float = 0.0,
+         initial_pan_jitter_deg_per_m: float = 0.0) -> PursuitEnvironment:
     """The HOAP-3 lateral-pursuit world as a dm_control environment (see the module docstring).
 
     ``stimuli``: {"source": "skimage" | "dir" | "procedural", "split": "train" | "heldout",
@@ -282,7 +292,8 @@ def load(seed: int | None = None,
     texture_set = load_stimuli(stimuli)
     task = LateralPursuitTask(lateral, trial_length, grid, texture_set.count, pan_reset=pan_reset,
                               max_pan_increment_deg=max_pan_increment_deg, random=seed,
-                              initial_pan_jitter_deg=initial_pan_jitter_deg)
+                              initial_pan_jitter_deg=initial_pan_jitter_deg,
+                              initial_pan_jitter_deg_per_m=initial_pan_jitter_deg_per_m)
     physics = Physics.create(texture_set, image_size=image_size, max_distance_m=max(grid))
     physics.set_perturbation(camera_rotation_deg=camera_rotation_deg, blur_sigma=blur_sigma,
                              rotation_axis=rotation_axis)
