@@ -66,8 +66,7 @@ def cuda_components(repeats: int) -> dict[str, float]:
     """Median ms of the coder (encode + dictionary update, both scales), the policy's act +
     update and one LM epoch on the GPU, each followed by a device synchronisation."""
     from parallax.coding.benchmark import _coder, _frames
-    from parallax.distance.benchmark import _paper_sized_learner
-    from parallax.distance.learner import _regression_residuals
+    from parallax.distance.benchmark import _paper_sized_learner, epoch_from_start
     from parallax.policy.benchmark import NUM_SCALES, STATE_DIM, _pooled_activities
     from parallax.policy.natural_actor_critic import NaturalActorCritic
 
@@ -90,16 +89,8 @@ def cuda_components(repeats: int) -> dict[str, float]:
             action = policy.act(states)
             policy.update(states, action, rewards, states, valid)
         operations[f"policy_act_update_B{batch}_ms"] = _synchronised(act_update, "cuda")
-    learner = _paper_sized_learner().to("cuda")
-    optimizer = learner.optimizer
-    inputs, targets = learner.queue.inputs * learner.weights, learner.queue.targets
-    start, start_mu = optimizer._flat().clone(), optimizer.mu
-
-    def lm_epoch() -> None:
-        optimizer._write(start)
-        optimizer.mu = start_mu
-        optimizer.step(_regression_residuals, inputs, targets, per_sample=True)
-    operations["lm_epoch_ms"] = _synchronised(lm_epoch, "cuda")
+    restore, epoch = epoch_from_start(_paper_sized_learner().to("cuda"))
+    operations["lm_epoch_ms"] = _synchronised(lambda: (restore(), epoch()), "cuda")
     return interleaved_medians_ms(operations, repeats, warmup=5)
 
 

@@ -68,9 +68,9 @@ def _scipy_fit(optimizer: LevenbergMarquardt, inputs: torch.Tensor, targets: tor
     return elapsed, 2.0 * float(solution.cost), int(solution.njev)
 
 
-def run(repeats: int = 50) -> dict[str, float]:
-    """Median milliseconds per operation, plus the SciPy comparison (see the module docstring)."""
-    learner = _paper_sized_learner()
+def epoch_from_start(learner: DistanceLearner) -> tuple[Callable[[], None], Callable[[], None]]:
+    """(restore, epoch) for timing one LM epoch of ``learner`` on its own queue, on its device:
+    ``restore`` puts the parameters and μ back where they are now, ``epoch`` runs one epoch."""
     optimizer = learner.optimizer
     inputs, targets = learner.queue.inputs * learner.weights, learner.queue.targets
     start, start_mu = optimizer._flat().clone(), optimizer.mu
@@ -81,6 +81,16 @@ def run(repeats: int = 50) -> dict[str, float]:
 
     def epoch() -> None:
         optimizer.step(_regression_residuals, inputs, targets, per_sample=True)
+    return restore, epoch
+
+
+def run(repeats: int = 50) -> dict[str, float]:
+    """Median milliseconds per operation, plus the SciPy comparison (see the module docstring)."""
+    learner = _paper_sized_learner()
+    optimizer = learner.optimizer
+    inputs, targets = learner.queue.inputs * learner.weights, learner.queue.targets
+    start, start_mu = optimizer._flat().clone(), optimizer.mu
+    restore, epoch = epoch_from_start(learner)
 
     def jacobian() -> None:
         optimizer._jacobian(start, _regression_residuals, (inputs, targets), True)
