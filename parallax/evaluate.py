@@ -75,7 +75,12 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
     out_dir = Path(out) if out else run_dir
     cfg = load_run_config(run_dir)
     if device is not None:  # e.g. a run trained on a GPU, evaluated on a machine without one
+        if device != "cpu" and not (device == "cuda" or device.startswith("cuda:")):
+            raise ValueError(f"--device must be cpu or cuda, got {device!r}")
         cfg.device = device
+    if str(cfg.device).startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(f"the run was trained with device={cfg.device} and torch sees no CUDA device here; "
+                         "pass --device cpu")
     if int(cfg.train.threads) > 0:
         # as in training: a second intra-op thread made a loaded 2-core machine ~30× slower
         torch.set_num_threads(int(cfg.train.threads))

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+import torch
 
 from parallax.config import compose
 from parallax.trainer import Trainer
@@ -155,6 +156,14 @@ def test_eval_writes_json_and_figures(tmp_path, tiny_overrides):
     assert (tmp_path / "eval_mae_per_position.png").is_file()
     assert (tmp_path / "mae_curves.png").is_file()
     assert "distance" in result and "total" in result["distance"]["by_range"]
+    with pytest.raises(ValueError, match="--device must be cpu or cuda, got 'gpu'"):
+        evaluate(tmp_path, distances=[3.0], device="gpu")
+    if not torch.cuda.is_available():  # a run trained on a GPU, evaluated here: told what to pass
+        config = tmp_path / "config.yaml"
+        config.write_text(config.read_text().replace("device: cpu", "device: cuda"))
+        with pytest.raises(ValueError, match="pass --device cpu"):
+            evaluate(tmp_path, distances=[3.0])
+        assert evaluate(tmp_path, distances=[3.0], between=[], device="cpu")["mae"]
 
 
 def test_a_stop_signal_during_a_checkpoint_write_waits_for_the_rename(tmp_path):
