@@ -128,6 +128,7 @@ class Experiment:
 
         prev_state = prev_action = None
         reference_state = None
+        valid = torch.ones(B, dtype=torch.bool, device=self.device)  # every robot learns every step
         reward_sum, error_sums, n_enc = 0.0, {}, 0
         stat_sums: dict[str, float] = {}
         n_updates = steps = 0
@@ -145,7 +146,6 @@ class Experiment:
             # Robots move in lockstep, so they cross a trial boundary together; the transition into
             # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
             if learn and prev_state is not None and iteration > 0:
-                valid = torch.ones(B, dtype=torch.bool, device=self.device)
                 stats = self.policy.update(prev_state, prev_action, out.reward, state, valid)
                 for k, v in stats.items():
                     stat_sums[k] = stat_sums.get(k, 0.0) + float(v)

@@ -72,6 +72,13 @@ def check_lateral_positions(lateral_positions: Sequence[float]) -> tuple[float, 
     return tuple(values)
 
 
+def _non_negative(name: str, value: Any, unit: str) -> float:
+    """``value`` as a float, or a one-line error naming ``name`` if it is not a finite number ≥ 0."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value >= 0):
+        raise ValueError(f"{name}={value!r}: expected a number ≥ 0 ({unit})")
+    return float(value)
+
+
 class LateralPursuitTask(base.Task):
     """Pursue the panel with the head pan while the body is put down at l1 … lr."""
 
@@ -87,16 +94,9 @@ class LateralPursuitTask(base.Task):
         if isinstance(max_pan_increment_deg, bool) or not isinstance(max_pan_increment_deg, (int, float)) \
                 or not (math.isfinite(max_pan_increment_deg) and max_pan_increment_deg > 0):
             raise ValueError(f"max_pan_increment_deg={max_pan_increment_deg!r}: expected a positive number")
-        if isinstance(initial_pan_jitter_deg, bool) or not isinstance(initial_pan_jitter_deg, (int, float)) \
-                or not (math.isfinite(initial_pan_jitter_deg) and initial_pan_jitter_deg >= 0):
-            raise ValueError(f"initial_pan_jitter_deg={initial_pan_jitter_deg!r}: expected a number ≥ 0 (degrees)")
-        if isinstance(initial_pan_jitter_deg_per_m, bool) \
-                or not isinstance(initial_pan_jitter_deg_per_m, (int, float)) \
-                or not (math.isfinite(initial_pan_jitter_deg_per_m) and initial_pan_jitter_deg_per_m >= 0):
-            raise ValueError(f"initial_pan_jitter_deg_per_m={initial_pan_jitter_deg_per_m!r}: expected a number ≥ 0 "
-                             "(degrees per metre of lateral step)")
-        self._initial_pan_jitter = float(initial_pan_jitter_deg)
-        self._initial_pan_jitter_per_m = float(initial_pan_jitter_deg_per_m)
+        self._initial_pan_jitter = _non_negative("initial_pan_jitter_deg", initial_pan_jitter_deg, "degrees")
+        self._initial_pan_jitter_per_m = _non_negative("initial_pan_jitter_deg_per_m", initial_pan_jitter_deg_per_m,
+                                                       "degrees per metre of lateral step")
         self._pending_positions = check_lateral_positions(lateral_positions)
         self._episode_positions = self._pending_positions
         self._trial_length = int(trial_length)
