@@ -108,7 +108,8 @@ def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
 #: trained with: a saved config that lacks one of them is read as having that value, so adding a
 #: setting neither blocks resuming old runs nor makes it look like an ablation in a report.
 SETTINGS_ADDED_LATER: dict[str, Any] = {"distance.outlier_mads": None, "distance.lm.weight_decay": 0.0,
-                                         "env.initial_pan_jitter_deg_per_m": 0.0}
+                                         "env.initial_pan_jitter_deg_per_m": 0.0,
+                                         "policy.eye_position_reference_m": 0.0}
 
 
 def run_settings(config: dict) -> dict[str, Any]:

@@ -116,6 +116,12 @@ class Experiment:
         with the current dictionaries and without learning (the coder's reference must be set)."""
         return self.coder(reference, learn=False).state
 
+    def eye_position(self, observations: list[dict], lateral: list[float]) -> torch.Tensor:
+        """The policy's proprioceptive entry (B, 1) for the robots' current pans (beyond the paper:
+        ``policy.eye_position_reference_m`` > 0); robots share the lateral position (lockstep)."""
+        pans = torch.tensor([float(o["pan"]) for o in observations], dtype=torch.float64)
+        return self.policy.eye_position_feature(pans, lateral[int(observations[0]["position_index"])])
+
     def run_presentation(self, learn: bool = True, greedy: bool = False,
                          keep_view: bool = False) -> Presentation:
         """All robots live through one presentation; learning on or frozen."""
@@ -143,6 +149,8 @@ class Experiment:
                 error_sums[scale] = error_sums.get(scale, 0.0) + float(e.mean())
             n_enc += 1
             state = out.state if reference_state is None else out.state - reference_state
+            if self.policy.eye_position_dims:
+                state = torch.cat([state, self.eye_position(obs, lateral)], dim=1)
             # Robots move in lockstep, so they cross a trial boundary together; the transition into
             # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
             if learn and prev_state is not None and iteration > 0:

@@ -43,16 +43,20 @@ def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME
         rewards, errors, mean_steps = [], [], []
         for distance in distances:
             for texture in (range(textures) if texture_indices is None else texture_indices):
-                reference, _, views = views_around_target(exp.envs[0], texture, float(distance), lateral, offsets)
+                reference, target, views = views_around_target(exp.envs[0], texture, float(distance), lateral, offsets)
                 reference_image = torch.from_numpy(reference[None].copy())
                 exp.coder.set_reference(reference_image)
                 baseline = exp.reference_states(reference_image) if exp.uses_reference_states else 0.0
                 row_r, row_e, row_a = [], [], []
-                for frame in views:
+                for offset, frame in zip(offsets, views):
                     out = exp.coder(torch.from_numpy(frame[None].copy()), learn=False)
+                    state = out.state - baseline
+                    if exp.policy.eye_position_dims:
+                        pan = torch.tensor([target + offset], dtype=torch.float64)
+                        state = torch.cat([state, exp.policy.eye_position_feature(pan, lateral)], dim=1)
                     row_r.append(float(out.reward[0]))
                     row_e.append([float(e[0]) for e in out.errors.values()])
-                    row_a.append(float(exp.policy.probabilities(out.state - baseline)[0].cpu().numpy() @ actions))
+                    row_a.append(float(exp.policy.probabilities(state)[0].cpu().numpy() @ actions))
                 rewards.append(row_r)
                 errors.append(row_e)
                 mean_steps.append(row_a)

@@ -84,8 +84,10 @@ def test_a_run_saved_before_a_setting_existed_has_that_settings_old_value():
     del saved.distance.lm["weight_decay"]
     del saved.distance["outlier_mads"]
     del saved.env["initial_pan_jitter_deg_per_m"]
+    del saved.policy["eye_position_reference_m"]
     assert set(SETTINGS_ADDED_LATER) == {"distance.lm.weight_decay", "distance.outlier_mads",
-                                         "env.initial_pan_jitter_deg_per_m"}
+                                         "env.initial_pan_jitter_deg_per_m",
+                                         "policy.eye_position_reference_m"}
     assert changed_settings(saved, current) == []
     assert changed_settings(saved, compose(["distance.lm.weight_decay=0.01"])) == [
         "distance.lm.weight_decay: 0.0 → 0.01"]

@@ -272,6 +272,8 @@ def test_config_instantiates_with_the_interface_keys() -> None:
     (dict(actions=[0.1, 0.1]), "actions"),
     (dict(critic_lr=-1.0), "critic_lr"),
     (dict(zscore_horizon=-5), "zscore_horizon"),
+    (dict(eye_position_reference_m=-0.5), "eye_position_reference_m"),
+    (dict(eye_position_reference_m=float("nan")), "eye_position_reference_m"),
 ])
 def test_bad_settings_are_refused(overrides: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
@@ -311,3 +313,32 @@ def test_difference_features_vanish_at_the_reference_and_stay_bounded() -> None:
     # a difference smaller than the running mean norm is scaled, not stretched to unit length
     small = differences[:1] * 0.01
     torch.testing.assert_close(policy.features(small).double(), small.double() / mean_norm, rtol=1e-5, atol=0)
+
+
+def test_eye_position_feature_is_the_implied_nearness_and_bypasses_the_normaliser() -> None:
+    # Beyond the paper: ν = tan(pan)·d_ref/l, one entry after the normalised θ.
+    policy = _policy(feature_norm="difference", eye_position_reference_m=0.5)
+    assert policy.input_dim == SMALL_DIM + 1 and policy.actor.shape == (7, SMALL_DIM + 1)
+    lateral, distance = 0.05, 4.0
+    on_target = math.degrees(math.atan(lateral / distance))
+    nu = policy.eye_position_feature(torch.tensor([on_target, 0.0, -on_target, 30.0]), lateral)
+    torch.testing.assert_close(nu.squeeze(1).double(), torch.tensor([0.5 / distance, 0.0, -0.5 / distance, 1.0],
+                                                                     dtype=torch.float64), rtol=1e-6, atol=1e-7)
+    assert policy.eye_position_feature(torch.tensor([3.0]), 0.0).item() == 0.0
+    theta = _states(3, seed=60) - _states(3, seed=61)
+    states = torch.cat([theta, nu[:3]], dim=1)
+    policy.act(states)
+    # the running norm sees θ alone, and ν passes through unchanged
+    assert float(policy.normalizer.norm_mean) == pytest.approx(float(theta.double().norm(dim=1).mean()), rel=1e-6)
+    features = policy.features(states)
+    torch.testing.assert_close(features[:, -1], nu[:3, 0])
+    torch.testing.assert_close(features[:, :-1], policy.normalizer(theta))
+    with pytest.raises(ValueError, match=f"\\(B, {SMALL_DIM + 1}\\)"):
+        policy.act(theta)
+    # its weight learns like any other: a rewarded step from a state with ν ≠ 0 moves it
+    before = policy.actor[:, -1].clone()
+    policy.update(states, torch.tensor([6, 6, 6]), torch.tensor([1.0, 1.0, 1.0]), states,
+                  torch.tensor([True, True, True]))
+    policy.update(states, torch.tensor([6, 6, 6]), torch.tensor([1.0, 1.0, 1.0]), states,
+                  torch.tensor([True, True, True]))
+    assert not torch.equal(policy.actor[:, -1], before)

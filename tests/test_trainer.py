@@ -213,3 +213,37 @@ def test_resuming_with_other_settings_is_refused_and_loses_nothing(tmp_path, tin
 def test_difference_states_change_the_run(tmp_path, tiny_overrides):
     difference = _train(tmp_path / "difference", tiny_overrides + ["policy.feature_norm=difference"])
     assert _without_timing(_train(tmp_path / "default", tiny_overrides)) != _without_timing(difference)
+
+
+def test_eye_position_feature_reaches_the_policy(tmp_path, tiny_overrides, monkeypatch):
+    # policy.eye_position_reference_m > 0 (beyond the paper): the last state entry the policy acts
+    # on is tan(pan)·d_ref/l for the pan of the image just encoded (the action is not applied yet).
+    import math
+
+    from parallax.policy import NaturalActorCritic
+
+    cfg = compose(tiny_overrides + ["policy.eye_position_reference_m=0.5", "env.initial_pan_jitter_deg=1"])
+    trainer = Trainer(cfg, tmp_path)
+    physics = trainer.exp.envs[0].physics
+    seen, expected = [], []
+    act = NaturalActorCritic.act
+
+    def recording_act(self, phi, greedy=False):
+        seen.append(float(phi[0, -1]))
+        nearness = math.tan(math.radians(physics.pan_deg())) * 0.5 / physics.lateral_position()
+        expected.append(max(-1.0, min(1.0, nearness)))
+        return act(self, phi, greedy)
+
+    monkeypatch.setattr(NaturalActorCritic, "act", recording_act)
+    try:
+        pres = trainer.exp.run_presentation()
+    finally:
+        trainer.exp.close()
+    assert len(seen) == pres.steps - 1 and len(set(seen)) > 2
+    assert seen == pytest.approx(expected, rel=1e-6, abs=1e-9)
+    monkeypatch.undo()
+    _train(tmp_path / "run", tiny_overrides + ["policy.eye_position_reference_m=0.5"])
+    from parallax import checkpoint
+
+    actor = checkpoint.load(tmp_path / "run" / "checkpoint.pt")["experiment"]["policy"]["actor"]
+    assert actor.shape[1] == 32 * 2 + 1 and bool(actor[:, -1].abs().sum() > 0)  # ν's weight was learnt

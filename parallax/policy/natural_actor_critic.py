@@ -91,6 +91,7 @@ class NaturalActorCritic(nn.Module):
         feature_norm: str = "none",
         seed: int = 0,
         zscore_horizon: int = 0,
+        eye_position_reference_m: float = 0.0,
     ) -> None:
         super().__init__()
         state_dim = _check_int("state_dim", state_dim, minimum=1)
@@ -102,6 +103,11 @@ class NaturalActorCritic(nn.Module):
             raise ValueError(f"actions must be finite numbers of degrees, got {action_list!r}")
         self.state_dim = state_dim
         self.num_scales = num_scales
+        self.eye_position_reference_m = _check_non_negative("eye_position_reference_m",
+                                                            eye_position_reference_m)
+        # Beyond the paper: one proprioceptive entry after the normalised θ (see eye_position_feature).
+        self.eye_position_dims = 1 if self.eye_position_reference_m > 0 else 0
+        self.input_dim = state_dim + self.eye_position_dims
         self.critic_lr = _check_non_negative("critic_lr", critic_lr)
         self.advantage_lr = _check_non_negative("advantage_lr", advantage_lr)
         self.actor_lr = _check_non_negative("actor_lr", actor_lr)
@@ -119,9 +125,9 @@ class NaturalActorCritic(nn.Module):
         num_actions = len(action_list)
         # float64 so that the pan increments sent to the robot are the configured degrees exactly.
         self.register_buffer("action_values", torch.tensor(action_list, dtype=torch.float64))
-        self.register_buffer("critic", torch.zeros(state_dim))
-        self.register_buffer("advantage", torch.zeros(num_actions, state_dim))
-        self.register_buffer("actor", torch.zeros(num_actions, state_dim))
+        self.register_buffer("critic", torch.zeros(self.input_dim))
+        self.register_buffer("advantage", torch.zeros(num_actions, self.input_dim))
+        self.register_buffer("actor", torch.zeros(num_actions, self.input_dim))
         self.register_buffer("average_reward", torch.zeros(()))
         self.register_buffer("updates", torch.zeros((), dtype=torch.int64))
         self.register_buffer("rejected_updates", torch.zeros((), dtype=torch.int64))
@@ -147,9 +153,9 @@ class NaturalActorCritic(nn.Module):
 
     def _check_states(self, name: str, states: torch.Tensor) -> torch.Tensor:
         if not isinstance(states, torch.Tensor) or states.ndim != 2 \
-                or states.shape[1] != self.state_dim:
+                or states.shape[1] != self.input_dim:
             shape = tuple(states.shape) if isinstance(states, torch.Tensor) else type(states)
-            raise ValueError(f"{name} must be a (B, {self.state_dim}) tensor, got {shape}")
+            raise ValueError(f"{name} must be a (B, {self.input_dim}) tensor, got {shape}")
         if not states.is_floating_point():
             raise ValueError(f"{name} must be a floating-point tensor, got {states.dtype}")
         if not bool(torch.isfinite(states).all()):
@@ -165,8 +171,31 @@ class NaturalActorCritic(nn.Module):
     # ------------------------------------------------------------------ policy
 
     def features(self, states: torch.Tensor) -> torch.Tensor:
-        """φ for raw states (B, state_dim), with the normaliser's current statistics."""
-        return self.normalizer(self._check_states("phi", states))
+        """φ for raw states (B, input_dim), with the normaliser's current statistics."""
+        return self._normalise(self._check_states("phi", states))
+
+    def _normalise(self, states: torch.Tensor) -> torch.Tensor:
+        """θ through the feature normaliser; the eye-position entry, if any, passes unchanged."""
+        if not self.eye_position_dims:
+            return self.normalizer(states)
+        return torch.cat([self.normalizer(states[:, :self.state_dim]),
+                          states[:, self.state_dim:]], dim=1)
+
+    def eye_position_feature(self, pan_deg: torch.Tensor, lateral_m: float) -> torch.Tensor:
+        """The proprioceptive entry (B, 1) for pans (B,) in degrees at lateral position l (m).
+
+        Beyond the paper. ν = tan(α)·d_ref / l is the nearness the pan implies (α = atan(l/d) at
+        the target, so ν = d_ref/d there), clipped to [−1, 1]: the same scale at every lateral
+        position, so one linear weight can tell "turned further than any plausible target"
+        wherever the robot stands. A linear policy on pooled activities alone cannot: once the
+        image pair no longer overlaps, a pan past the target and one short of it look alike
+        (``python -m parallax.landscape … --span 4``). ν is 0 at l = 0, where no pan is implied.
+        """
+        pan = torch.as_tensor(pan_deg, dtype=self.actor.dtype, device=self.actor.device).reshape(-1, 1)
+        if abs(lateral_m) < 1e-9:
+            return torch.zeros_like(pan)
+        nearness = torch.tan(torch.deg2rad(pan)) * (self.eye_position_reference_m / float(lateral_m))
+        return nearness.clamp(-1.0, 1.0)
 
     def _logits(self, features: torch.Tensor) -> torch.Tensor:
         return features @ self.actor.T / self.temperature
@@ -184,8 +213,8 @@ class NaturalActorCritic(nn.Module):
         """
         states = self._check_states("phi", phi)
         if self.training:
-            self.normalizer.observe(states)
-        logits = self._logits(self.normalizer(states))
+            self.normalizer.observe(states[:, :self.state_dim])
+        logits = self._logits(self._normalise(states))
         if greedy:
             ordered = logits[:, self._greedy_tie_order]
             return self._greedy_tie_order[ordered.argmax(dim=1)]
@@ -209,7 +238,7 @@ class NaturalActorCritic(nn.Module):
         """
         features = self.features(phi)
         batch = features.shape[0]
-        next_features = self.normalizer(self._check_states("next_phi", next_phi))
+        next_features = self._normalise(self._check_states("next_phi", next_phi))
         action = self._check_rows("action", action, batch)
         if action.dtype != torch.int64:
             raise ValueError(f"action must be an int64 (LongTensor) of indices, got {action.dtype}")
@@ -291,4 +320,5 @@ class NaturalActorCritic(nn.Module):
                 f"α_v={self.critic_lr}, α_n={self.advantage_lr}, α_p={self.actor_lr}, "
                 f"ξ={self.discount}, ζ={self.reward_rate}, λ={self.weight_decay}, "
                 f"T={self.temperature}, feature_norm={self.feature_norm!r}, "
-                f"zscore_horizon={self.normalizer.horizon}")
+                f"zscore_horizon={self.normalizer.horizon}, "
+                f"eye_position_reference_m={self.eye_position_reference_m}")
