@@ -14,9 +14,10 @@
 # Then parallax-eval of the 5–10 and 5–20 cm models before and after the perturbation (held-out
 # textures, distances between the grid points), their checkpoints copied into
 # docs/results/checkpoints/, and the report (results.json beside it).
-# Since session 5 every run also uses three settings beyond the paper, chosen on probes
+# Since session 5 every run also uses settings beyond the paper, chosen on probes
 # (docs/results/beyond_the_paper.md): the policy's state relative to the zero-disparity view,
-# trials starting from a random pan in ±2°, and weight decay 0.1 in the LM fit.
+# trials starting from a random pan in ±2°, weight decay 0.1 in the LM fit, and (session 6) the
+# eye's own pan as one more policy feature.
 # Extra arguments are Hydra overrides for every training job (they come last, so e.g.
 # train.presentations=2000 lengthens every run). Environment: launch/ablation_lib.sh, plus
 #   EVAL_ARGS      parallax-eval options (default: the grid 3.0, 3.5, …, 10.0 m, one held-out texture each)
@@ -29,7 +30,7 @@ sweep="$(px_sweep_dir reproduce)"
 unweighted="$(px_sweep_dir reproduce_unweighted)"
 five_ten_c50="$(px_sweep_dir reproduce_5_10_c50)"
 seeds="seed=${SEEDS:-0,1,2}"
-read -ra improvements <<< "${IMPROVEMENTS-policy.feature_norm=difference env.initial_pan_jitter_deg=2 distance.lm.weight_decay=0.1}"
+read -ra improvements <<< "${IMPROVEMENTS-policy.feature_norm=difference env.initial_pan_jitter_deg=2 distance.lm.weight_decay=0.1 policy.eye_position_reference_m=0.5}"
 singles=paper_single_5,paper_single_7,paper_single_10,paper_single_13,paper_single_15,paper_single_20
 status=0
 px_sweep "$sweep" "experiment=$singles" "$seeds" train.presentations=400 "${improvements[@]}" "$@" || status=$?

@@ -109,8 +109,12 @@ def last_trials_spread(run_dir: str | Path, trials: int = 100, runaway_deg: floa
 
 
 def _wall_clock(run_dir: Path) -> dict[int, float]:
-    """Seconds since the start of the run at each logged step, from TensorBoard's clock."""
+    """Seconds since the start of the run at each logged step, from TensorBoard's clock; empty
+    (wall time unknown) when the run has no TensorBoard folder, e.g. one copied without it."""
     import logging
+
+    if not (run_dir / "tb").is_dir():
+        return {}
 
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 

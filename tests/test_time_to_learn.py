@@ -44,6 +44,16 @@ def test_threshold_decides_and_needs_enough_trials(tiny_run):
     assert never["presentation"] is None and never["worst_position_at_end"]["mae_deg"] == pytest.approx(worst)
 
 
+def test_a_run_copied_without_its_tensorboard_folder_has_no_wall_time(tiny_run, tmp_path):
+    import shutil
+
+    copy = tmp_path / "copy"
+    shutil.copytree(tiny_run, copy, ignore=shutil.ignore_patterns("tb"))
+    worst = max(ttl.recent_mae_per_position(copy, trials=2)[-1]["mae"].values())
+    reached = ttl.time_to_learn(copy, threshold=worst + 10.0, trials=2)
+    assert reached["presentation"] == 2 and reached["wall_time_s"] is None
+
+
 def test_cli_refuses_bad_input(tiny_run, tmp_path, capsys):
     assert ttl.main([str(tiny_run), "--threshold", "0"]) == 2
     assert "--threshold must be > 0" in capsys.readouterr().err
