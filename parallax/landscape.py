@@ -74,7 +74,7 @@ def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m parallax.landscape", description=__doc__.split("\n\n")[0])
-    parser.add_argument("run_dir")
+    parser.add_argument("run_dirs", nargs="+", metavar="RUN", help="one or more run directories")
     parser.add_argument("--checkpoint", default=checkpoint.CHECKPOINT_NAME)
     parser.add_argument("--lateral", type=float, default=None,
                         help="lateral position in metres (default: the run's first)")
@@ -83,18 +83,40 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--texture-indices", type=int, nargs="+", default=None,
                         help="these training textures instead of the first --textures")
     parser.add_argument("--span", type=float, default=1.0, help="largest |pan − α*|, degrees")
-    parser.add_argument("--json", help="also write the result here")
+    parser.add_argument("--json", help="also write the result here (a list when several runs)")
+    parser.add_argument("--plot", help="also plot E_π[a] and the reward of every run into this PNG")
     args = parser.parse_args(argv)
-    if not (Path(args.run_dir) / args.checkpoint).is_file():
-        print(f"[landscape] {args.run_dir} has no {args.checkpoint}", file=sys.stderr)
-        return 2
+    for run_dir in args.run_dirs:
+        if not (Path(run_dir) / args.checkpoint).is_file():
+            print(f"[landscape] {run_dir} has no {args.checkpoint}", file=sys.stderr)
+            return 2
     if args.textures < 1 or args.span <= 0:
         print(f"[landscape] --textures must be ≥ 1 and --span > 0, got {args.textures} and {args.span}",
               file=sys.stderr)
         return 2
     torch.set_num_threads(1)
-    result = sweep(args.run_dir, args.checkpoint, args.lateral, args.distances, args.textures, args.span,
-                    texture_indices=args.texture_indices)
+    results = []
+    for run_dir in args.run_dirs:
+        result = sweep(run_dir, args.checkpoint, args.lateral, args.distances, args.textures, args.span,
+                       texture_indices=args.texture_indices)
+        results.append(result)
+        if len(args.run_dirs) > 1:
+            print(f"== {run_dir}")
+        _print_table(result)
+    if args.json:
+        payload = results[0] if len(results) == 1 else results
+        Path(args.json).write_text(json.dumps(payload, indent=1))
+    if args.plot:
+        from parallax.plots import pursuit_landscape
+
+        # a run given twice gets its position in the list, so no line hides another
+        labels = [f"{_label(run)} [{i + 1}]" if args.run_dirs.count(run) > 1 else _label(run)
+                  for i, run in enumerate(args.run_dirs)]
+        print(f"[landscape] plot: {pursuit_landscape(dict(zip(labels, results)), args.plot)}")
+    return 0
+
+
+def _print_table(result: dict) -> None:
     header = "offset °   reward  " + "  ".join(f"e_{s:<6}" for s in result["scales"]) + "  E[step] °"
     print(header)
     for i, offset in enumerate(result["offsets_deg"]):
@@ -103,9 +125,15 @@ def main(argv: list[str] | None = None) -> int:
     peaks = np.asarray(result["peak_offsets_deg"])
     print(f"reward peak − α* per stimulus: median {np.median(peaks):+.2f}°, "
           f"range {peaks.min():+.2f}…{peaks.max():+.2f}° ({len(peaks)} stimuli)")
-    if args.json:
-        Path(args.json).write_text(json.dumps(result, indent=1))
-    return 0
+
+
+def _label(run_dir: str) -> str:
+    """A short legend entry: the run's experiment, seed and beyond-the-paper policy settings."""
+    cfg = load_run_config(Path(run_dir))
+    policy = cfg.policy
+    eye = float(policy.get("eye_position_reference_m", 0.0) or 0.0)
+    extras = [f"feature_norm={policy.feature_norm}"] + ([f"eye_position_reference_m={eye:g}"] if eye else [])
+    return f"{cfg.curriculum.name} seed {cfg.seed}: " + ", ".join(extras)
 
 
 if __name__ == "__main__":

@@ -174,3 +174,22 @@ def learning_curves_by_robots(curves: dict[str, dict], path: str | Path, trials:
         ax.grid(alpha=0.3)
     by_time.legend(fontsize=8)
     return _save(fig, Path(path))
+
+
+def pursuit_landscape(results: dict[str, dict], path: str | Path) -> Path:
+    """The policy's mean pan step E_π[a] and the reward against the pan's offset from α*, one line
+    per run (``python -m parallax.landscape RUN... --plot``): where E_π[a] has the sign of the
+    offset, the eye is pushed further away from the target."""
+    fig, (steps, rewards) = plt.subplots(1, 2, figsize=(11, 4), sharex=True)
+    for label, result in results.items():
+        steps.plot(result["offsets_deg"], result["mean_step_deg"], label=label)
+        rewards.plot(result["offsets_deg"], result["reward"], label=label)
+    steps.axhline(0.0, color="k", lw=0.6)
+    steps.set_ylabel("policy's mean pan step E_π[a] (deg)")
+    rewards.set_ylabel("reward −(e_C + e_F)")
+    for ax in (steps, rewards):
+        ax.axvline(0.0, color="k", lw=0.6, ls=":")
+        ax.set_xlabel("pan − α* (deg)")
+        ax.grid(alpha=0.3)
+    steps.legend(fontsize=7)
+    return _save(fig, Path(path))

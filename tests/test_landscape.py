@@ -38,3 +38,16 @@ def test_cli_prints_the_peak_and_refuses_a_missing_checkpoint(tiny_run, tmp_path
     assert json.loads(out.read_text())["lateral_position_m"] == pytest.approx(0.05)
     assert landscape.main([str(tmp_path)]) == 2
     assert "has no checkpoint.pt" in capsys.readouterr().err
+    assert landscape.main([str(tiny_run), str(tmp_path)]) == 2   # every run is checked first
+    assert "has no checkpoint.pt" in capsys.readouterr().err
+
+
+def test_several_runs_are_compared_in_one_plot(tiny_run, tmp_path, capsys):
+    png, out = tmp_path / "landscape.png", tmp_path / "both.json"
+    assert landscape.main([str(tiny_run), str(tiny_run), "--distances", "5", "--textures", "1",
+                           "--span", "0.1", "--plot", str(png), "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert printed.count(f"== {tiny_run}") == 2 and "plot:" in printed
+    assert png.stat().st_size > 0
+    both = json.loads(out.read_text())
+    assert len(both) == 2 and both[0]["mean_step_deg"] == both[1]["mean_step_deg"]
