@@ -87,6 +87,26 @@ def recent_mae_per_position(run_dir: str | Path, trials: int = 100) -> list[dict
     return out
 
 
+def _last_trials(run_dir: str | Path, trials: int) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """(position labels, |error| and signed error of the last ``trials`` trials before the
+    perturbation): signed + when the eye went past α*, − when it stopped short or turned the wrong
+    way (seen from the start at 0)."""
+    table = trial_errors(run_dir)
+    past = (table["pans"] - table["targets"]) * np.sign(table["targets"])
+    return list(table["labels"]), table["errors"][-trials:], past[-trials:]
+
+
+def _spread(labels: list[str], tail: np.ndarray, past: np.ndarray, runaway_deg: float) -> dict:
+    spread = {}
+    for p, k in enumerate(labels):
+        runaway = tail[:, p] > runaway_deg
+        spread[k] = {"mean": float(tail[:, p].mean()), "median": float(np.median(tail[:, p])),
+                     "runaway_share": float(runaway.mean()), "trials": int(tail.shape[0]),
+                     "past_share": float((past[runaway, p] > 0).mean()) if runaway.any() else float("nan"),
+                     "runaway_signed_mean": float(past[runaway, p].mean()) if runaway.any() else float("nan")}
+    return spread
+
+
 def last_trials_spread(run_dir: str | Path, trials: int = 100, runaway_deg: float = 1.0) -> dict:
     """Per position, over the last ``trials`` trials before the perturbation: mean (Tables 2–3),
     median, the share of trials off by more than ``runaway_deg`` — a mean far above the median
@@ -94,18 +114,19 @@ def last_trials_spread(run_dir: str | Path, trials: int = 100, runaway_deg: floa
     ``past_share`` of them ended beyond the target (the pan past α*, seen from the start at 0),
     ``runaway_signed_mean`` their mean error in that sense (positive: past the target, negative:
     short of it or the wrong way)."""
-    table = trial_errors(run_dir)
-    tail = table["errors"][-trials:]
-    # + when the eye went past α*, − when it stopped short or turned the wrong way
-    past = ((table["pans"] - table["targets"]) * np.sign(table["targets"]))[-trials:]
-    spread = {}
-    for p, k in enumerate(table["labels"]):
-        runaway = tail[:, p] > runaway_deg
-        spread[k] = {"mean": float(tail[:, p].mean()), "median": float(np.median(tail[:, p])),
-                     "runaway_share": float(runaway.mean()), "trials": int(tail.shape[0]),
-                     "past_share": float((past[runaway, p] > 0).mean()) if runaway.any() else float("nan"),
-                     "runaway_signed_mean": float(past[runaway, p].mean()) if runaway.any() else float("nan")}
-    return spread
+    return _spread(*_last_trials(run_dir, trials), runaway_deg)
+
+
+def pooled_spread(run_dirs, trials: int = 100, runaway_deg: float = 1.0) -> dict:
+    """:func:`last_trials_spread` over the last ``trials`` trials of every run together (e.g. the
+    seeds of one setting); the runs must share their lateral positions."""
+    parts = [_last_trials(run, trials) for run in run_dirs]
+    labels = parts[0][0]
+    for run, (other, _, _) in zip(run_dirs, parts):
+        if other != labels:
+            raise ValueError(f"{run} has lateral positions {other}, not {labels}: pool runs of one setting")
+    return _spread(labels, np.concatenate([t for _, t, _ in parts]), np.concatenate([p for _, _, p in parts]),
+                   runaway_deg)
 
 
 def _wall_clock(run_dir: Path) -> dict[int, float]:
@@ -186,6 +207,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trials", type=int, default=100, help="recent trials per position")
     parser.add_argument("--spread", action="store_true",
                         help="also print the last trials' mean, median and share off by > 1° per position")
+    parser.add_argument("--pooled", action="store_true",
+                        help="also print the spread of all runs' last trials together (the seeds of one setting)")
     parser.add_argument("--curves", help="also plot the worst position's recent MAE against "
                         "robot-iterations and wall time into this PNG (B = 1 against B = 16)")
     parser.add_argument("--json", help="also write the results here")
@@ -209,21 +232,34 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{r['run_dir']}: ≤ {r['threshold_deg']}° at every position after presentation "
                   f"{r['presentation']} ({r['steps']} iterations, {wall}; {worst_text})")
         if args.spread:
-            spread = last_trials_spread(r["run_dir"], args.trials)
-            r["spread"] = spread
-            print("  last trials before the perturbation, per position: "
-                  + "  ".join(f"{k} cm {v['mean']:.2f}/{v['median']:.2f}°/{100 * v['runaway_share']:.0f}%"
-                              for k, v in spread.items()) + "   (mean/median/share > 1°)")
-            runaways = {k: v for k, v in spread.items() if v["runaway_share"] > 0}
-            if runaways:
-                print("  runaways past the target / their mean signed error (+ past α*, − short or the wrong way): "
-                      + "  ".join(f"{k} cm {100 * v['past_share']:.0f}%/{v['runaway_signed_mean']:+.2f}°"
-                                  for k, v in runaways.items()))
+            r["spread"] = last_trials_spread(r["run_dir"], args.trials)
+            _print_spread(r["spread"])
+    pooled = None
+    if args.pooled:
+        try:
+            pooled = pooled_spread(args.runs, args.trials)
+        except ValueError as error:
+            print(f"[time_to_learn] --pooled: {error}", file=sys.stderr)
+            return 2
+        print(f"all {len(args.runs)} runs together:")
+        _print_spread(pooled)
     if args.curves:
         print(f"curves: {plot_learning_curves(args.runs, args.curves, args.trials)}")
     if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1))
+        Path(args.json).write_text(json.dumps(results if pooled is None else {"runs": results, "pooled": pooled},
+                                              indent=1))
     return 0
+
+
+def _print_spread(spread: dict) -> None:
+    print("  last trials before the perturbation, per position: "
+          + "  ".join(f"{k} cm {v['mean']:.2f}/{v['median']:.2f}°/{100 * v['runaway_share']:.0f}%"
+                      for k, v in spread.items()) + "   (mean/median/share > 1°)")
+    runaways = {k: v for k, v in spread.items() if v["runaway_share"] > 0}
+    if runaways:
+        print("  runaways past the target / their mean signed error (+ past α*, − short or the wrong way): "
+              + "  ".join(f"{k} cm {100 * v['past_share']:.0f}%/{v['runaway_signed_mean']:+.2f}°"
+                          for k, v in runaways.items()))
 
 
 if __name__ == "__main__":

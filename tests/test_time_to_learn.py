@@ -81,6 +81,25 @@ def test_spread_mean_is_the_tables_mean_and_counts_runaways(tiny_run):
         assert v["runaway_signed_mean"] == pytest.approx(past[:, p].mean())
 
 
+def test_pooled_spread_is_over_every_runs_last_trials(tiny_run, tmp_path, capsys):
+    single = ttl.last_trials_spread(tiny_run, trials=3)
+    twice = ttl.pooled_spread([tiny_run, tiny_run], trials=3)
+    for k, v in twice.items():   # the same trials twice: same statistics, twice the count
+        assert v["mean"] == pytest.approx(single[k]["mean"]) and v["trials"] == 6
+        assert v["median"] == pytest.approx(single[k]["median"])
+    out = tmp_path / "pooled.json"
+    assert ttl.main([str(tiny_run), str(tiny_run), "--trials", "3", "--pooled", "--json", str(out)]) == 0
+    assert "all 2 runs together:" in capsys.readouterr().out
+    assert json.loads(out.read_text())["pooled"].keys() == single.keys()
+    # runs of other lateral positions are refused, in one line
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "config.yaml").write_text((tiny_run / "config.yaml").read_text().replace("- 0.1", "- 0.15"))
+    (other / "metrics.jsonl").write_text((tiny_run / "metrics.jsonl").read_text())
+    with pytest.raises(ValueError, match="lateral positions"):
+        ttl.pooled_spread([tiny_run, other], trials=3)
+
+
 def test_learning_curve_counts_robot_iterations_and_plots(tiny_run, tmp_path):
     curve = ttl.learning_curve(tiny_run, trials=2)
     steps = [r["steps"] for r in ttl.recent_mae_per_position(tiny_run, trials=2)]
