@@ -34,7 +34,14 @@ def grid(start: float, stop: float, step: float) -> list[float]:
     return [round(start + i * step, 6) for i in range(n)]
 
 
-def run_jobs(exp: Experiment, jobs: list[tuple[float, int]], greedy: bool) -> dict[str, np.ndarray]:
+#: How a trial's pan becomes a component of s: "last", the pan at its last iteration (the
+#: paper's q_p, eq. 16); "best_reward" (beyond the paper), the pan whose image the coder encoded
+#: best during the trial, which a trial that ran away at its end does not spoil.
+READOUTS = ("last", "best_reward")
+
+
+def run_jobs(exp: Experiment, jobs: list[tuple[float, int]], greedy: bool,
+             readout: str = "last") -> dict[str, np.ndarray]:
     """Run one frozen presentation per (distance, texture) job, B robots at a time."""
     pans, targets, dists = [], [], []
     B = exp.robots
@@ -44,7 +51,7 @@ def run_jobs(exp: Experiment, jobs: list[tuple[float, int]], greedy: bool) -> di
         for env, (d, tex) in zip(exp.envs, padded):
             env.task.set_next_stimulus(texture_index=tex, distance=d)
         pres = exp.run_presentation(learn=False, greedy=greedy)
-        pans.append(pres.pans[:len(batch)])
+        pans.append((pres.pans if readout == "last" else pres.best_pans)[:len(batch)])
         targets.append(pres.targets[:len(batch)])
         dists.append(pres.distances[:len(batch)])
     return {"pans": np.concatenate(pans), "targets": np.concatenate(targets),
@@ -70,7 +77,9 @@ def distance_results(learner, pans: np.ndarray, distances: np.ndarray) -> dict:
 def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | None = None,
              between: list[float] | None = None, perturbation: str = "auto",
              out: str | Path | None = None, checkpoint_name: str = checkpoint.CHECKPOINT_NAME,
-             device: str | None = None) -> dict:
+             device: str | None = None, readout: str = "last") -> dict:
+    if readout not in READOUTS:
+        raise ValueError(f"--readout must be one of {', '.join(READOUTS)}, got {readout!r}")
     run_dir = Path(run_dir)
     out_dir = Path(out) if out else run_dir
     cfg = load_run_config(run_dir)
@@ -109,19 +118,19 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
         jobs = [(d, (i * textures + k) % n_tex) for i, d in enumerate(distances) for k in range(textures)]
         labels = [position_label(l) for l in exp.lateral_positions]
         result: dict = {"run_dir": str(run_dir), "checkpoint": checkpoint_name,
-                        "presentations": int(state["presentation"]),
+                        "presentations": int(state["presentation"]), "readout": readout,
                         "perturbed": perturbed, "textures_per_distance": textures,
                         "lateral_positions_cm": labels, "mae_per_position": {}, "mae": {}}
         runs = {}
         for mode, greedy in (("greedy", True), ("sampled", False)):
-            runs[mode] = run = run_jobs(exp, jobs, greedy)
+            runs[mode] = run = run_jobs(exp, jobs, greedy, readout)
             err = np.abs(run["pans"] - run["targets"])
             result["mae_per_position"][mode] = {k: float(v) for k, v in zip(labels, err.mean(axis=0))}
             result["mae"][mode] = float(err.mean())
         between_run = None
         if between:
             between_jobs = [(d, i % n_tex) for i, d in enumerate(between)]
-            between_run = run_jobs(exp, between_jobs, True)
+            between_run = run_jobs(exp, between_jobs, True, readout)
         # The greedy eye's vectors s, kept whether or not this run's learner is ready, so that
         # parallax-replay can score other distance learners on exactly these eye movements.
         result["greedy_samples"] = {
@@ -157,7 +166,9 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
 
 
 def format_eval(result: dict) -> str:
-    lines = [f"{'position (cm)':>14} {'greedy MAE':>11} {'sampled MAE':>12}"]
+    lines = [] if result.get("readout", "last") == "last" else [
+        f"readout: {result['readout']} (each trial's pan where the coder's reward was highest)"]
+    lines.append(f"{'position (cm)':>14} {'greedy MAE':>11} {'sampled MAE':>12}")
     for k in result["lateral_positions_cm"]:
         lines.append(f"{k:>14} {result['mae_per_position']['greedy'][k]:>11.3f} "
                      f"{result['mae_per_position']['sampled'][k]:>12.3f}")
@@ -186,11 +197,14 @@ def main(argv: list[str] | None = None) -> None:
                              f"{checkpoint.BEFORE_PERTURBATION_NAME} for the state before §5's perturbation)")
     parser.add_argument("--device", default=None,
                         help="cpu or cuda (default: the device the run was trained on)")
+    parser.add_argument("--readout", default="last",
+                        help="last: each trial's last pan, the paper's q_p (default); best_reward "
+                             "(beyond the paper): the pan where the coder's reward was highest")
     args = parser.parse_args(argv)
     try:
         result = evaluate(args.run_dir, textures=args.textures, distances=args.distances,
                           between=args.between, perturbation=args.perturbation, out=args.out,
-                          checkpoint_name=args.checkpoint, device=args.device)
+                          checkpoint_name=args.checkpoint, device=args.device, readout=args.readout)
     except (FileNotFoundError, ValueError) as exc:
         print(f"parallax-eval: error: {exc}", file=sys.stderr)
         sys.exit(2)

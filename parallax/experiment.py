@@ -32,6 +32,9 @@ class Presentation:
     lateral_positions: list[float]   # the list L used (metres)
     pans: np.ndarray                 # (B, r) pan at the last iteration of each trial, q_p (deg)
     targets: np.ndarray              # (B, r) target pan α* at that iteration (deg)
+    # (B, r) beyond the paper: the pan at the iteration of each trial whose image the coder
+    # encoded best (highest reward −(eC+eF)); a readout of s that a runaway's end does not spoil
+    best_pans: np.ndarray
     distances: np.ndarray            # (B,) metres
     textures: np.ndarray             # (B,) texture indices
     steps: int                       # iterations per robot
@@ -130,6 +133,7 @@ class Experiment:
         lateral = list(self.envs[0].task.lateral_positions)
         B, r, t_h = self.robots, len(lateral), self.trial_length
         pans, targets = np.zeros((B, r)), np.zeros((B, r))
+        best_pans, best_rewards = np.zeros((B, r)), np.full((B, r), -np.inf)
         self.coder.set_reference(self._images(obs, "reference"))
 
         prev_state = prev_action = None
@@ -148,6 +152,11 @@ class Experiment:
             for scale, e in out.errors.items():
                 error_sums[scale] = error_sums.get(scale, 0.0) + float(e.mean())
             n_enc += 1
+            p = int(obs[0]["position_index"])
+            rewards = out.reward.cpu().numpy().astype(np.float64)
+            better = rewards > best_rewards[:, p]      # ties keep the earlier pan
+            best_rewards[better, p] = rewards[better]
+            best_pans[better, p] = np.array([float(o["pan"]) for o in obs])[better]
             state = out.state if reference_state is None else out.state - reference_state
             if self.policy.eye_position_dims:
                 state = torch.cat([state, self.eye_position(obs, lateral)], dim=1)
@@ -159,7 +168,6 @@ class Experiment:
                     stat_sums[k] = stat_sums.get(k, 0.0) + float(v)
                 n_updates += 1
             if iteration == t_h - 1:
-                p = int(obs[0]["position_index"])
                 pans[:, p] = [float(o["pan"]) for o in obs]
                 targets[:, p] = [float(o["target_pan"]) for o in obs]
             if timesteps[0].last():
@@ -175,7 +183,7 @@ class Experiment:
         if keep_view:
             view = np.concatenate([obs[0]["reference"], obs[0]["image"]], axis=1)
         return Presentation(
-            lateral_positions=lateral, pans=pans, targets=targets,
+            lateral_positions=lateral, pans=pans, targets=targets, best_pans=best_pans,
             distances=np.array([float(o["distance"]) for o in obs]),
             textures=np.array([int(o["texture_index"]) for o in obs]),
             steps=steps + 1, reward=reward_sum / n_enc,

@@ -164,6 +164,50 @@ def test_eval_writes_json_and_figures(tmp_path, tiny_overrides):
         with pytest.raises(ValueError, match="pass --device cpu"):
             evaluate(tmp_path, distances=[3.0])
         assert evaluate(tmp_path, distances=[3.0], between=[], device="cpu")["mae"]
+        config.write_text(config.read_text().replace("device: cuda", "device: cpu"))
+    # beyond the paper: s read where the coder's reward was highest in each trial
+    best = evaluate(tmp_path, distances=[3.0, 6.5, 10.0], between=[], out=tmp_path / "best",
+                    readout="best_reward")
+    assert best["readout"] == "best_reward" and result["readout"] == "last"
+    assert best["greedy_samples"]["grid"]["distances"] == result["greedy_samples"]["grid"]["distances"]
+    with pytest.raises(ValueError, match="--readout must be one of last, best_reward, got 'peak'"):
+        evaluate(tmp_path, distances=[3.0], readout="peak")
+
+
+def test_best_pans_are_the_pans_where_the_reward_peaked(tmp_path, tiny_overrides, monkeypatch):
+    # Presentation.best_pans (beyond the paper): per trial, the pan of the image with the highest
+    # reward −(eC + eF), the earliest on ties; the paper's q_p (pans) is the last pan.
+    cfg = compose(tiny_overrides + ["env.initial_pan_jitter_deg=1"])
+    trainer = Trainer(cfg, tmp_path)
+    exp = trainer.exp
+    physics = exp.envs[0].physics
+    seen = []   # (position index, pan, reward) of every encoded image
+    forward = type(exp.coder).forward
+
+    def recording_forward(self, images, learn=None):
+        out = forward(self, images, learn)
+        if images.shape[0] == 1 and not torch.equal(images, self._last_reference):
+            seen.append((round(physics.lateral_position(), 6), physics.pan_deg(), float(out.reward[0])))
+        return out
+
+    set_reference = type(exp.coder).set_reference
+
+    def remembering_set_reference(self, reference):
+        self._last_reference = torch.as_tensor(reference).clone()
+        return set_reference(self, reference)
+
+    monkeypatch.setattr(type(exp.coder), "forward", recording_forward)
+    monkeypatch.setattr(type(exp.coder), "set_reference", remembering_set_reference)
+    try:
+        pres = exp.run_presentation(learn=False, greedy=False)
+    finally:
+        exp.close()
+    for p, lateral in enumerate(pres.lateral_positions):
+        trial = [(pan, reward) for l, pan, reward in seen if l == round(lateral, 6)]
+        assert len(trial) == 4                                     # env.trial_length
+        expected = max(trial, key=lambda pr: pr[1])[0]             # max() keeps the first on ties
+        assert pres.best_pans[0, p] == pytest.approx(expected, abs=1e-9)
+        assert pres.pans[0, p] == pytest.approx(trial[-1][0], abs=1e-9)
 
 
 def test_a_stop_signal_during_a_checkpoint_write_waits_for_the_rename(tmp_path):
