@@ -119,11 +119,16 @@ class Experiment:
         with the current dictionaries and without learning (the coder's reference must be set)."""
         return self.coder(reference, learn=False).state
 
-    def eye_position(self, observations: list[dict], lateral: list[float]) -> torch.Tensor:
-        """The policy's proprioceptive entry (B, 1) for the robots' current pans (beyond the paper:
-        ``policy.eye_position_reference_m`` > 0); robots share the lateral position (lockstep)."""
-        pans = torch.tensor([float(o["pan"]) for o in observations], dtype=torch.float64)
-        return self.policy.eye_position_feature(pans, lateral[int(observations[0]["position_index"])])
+    def policy_state(self, theta: torch.Tensor, reference_state: torch.Tensor | None,
+                     pans_deg: np.ndarray, lateral_m: float) -> torch.Tensor:
+        """What the policy acts on: θ (B, state_dim), minus θ_ref with ``feature_norm=difference``,
+        then the eye-position entry when ``policy.eye_position_reference_m`` > 0 (both beyond the
+        paper), for the robots' pans (B,) at their shared lateral position."""
+        state = theta if reference_state is None else theta - reference_state
+        if self.policy.eye_position_dims:
+            pans = torch.as_tensor(np.asarray(pans_deg, dtype=np.float64))
+            state = torch.cat([state, self.policy.eye_position_feature(pans, lateral_m)], dim=1)
+        return state
 
     def run_presentation(self, learn: bool = True, greedy: bool = False,
                          keep_view: bool = False) -> Presentation:
@@ -153,13 +158,12 @@ class Experiment:
                 error_sums[scale] = error_sums.get(scale, 0.0) + float(e.mean())
             n_enc += 1
             p = int(obs[0]["position_index"])
+            current_pans = np.array([float(o["pan"]) for o in obs])
             rewards = out.reward.cpu().numpy().astype(np.float64)
             better = rewards > best_rewards[:, p]      # ties keep the earlier pan
             best_rewards[better, p] = rewards[better]
-            best_pans[better, p] = np.array([float(o["pan"]) for o in obs])[better]
-            state = out.state if reference_state is None else out.state - reference_state
-            if self.policy.eye_position_dims:
-                state = torch.cat([state, self.eye_position(obs, lateral)], dim=1)
+            best_pans[better, p] = current_pans[better]
+            state = self.policy_state(out.state, reference_state, current_pans, lateral[p])
             # Robots move in lockstep, so they cross a trial boundary together; the transition into
             # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
             if learn and prev_state is not None and iteration > 0:
@@ -168,7 +172,7 @@ class Experiment:
                     stat_sums[k] = stat_sums.get(k, 0.0) + float(v)
                 n_updates += 1
             if iteration == t_h - 1:
-                pans[:, p] = [float(o["pan"]) for o in obs]
+                pans[:, p] = current_pans
                 targets[:, p] = [float(o["target_pan"]) for o in obs]
             if timesteps[0].last():
                 break

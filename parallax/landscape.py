@@ -46,14 +46,11 @@ def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME
                 reference, target, views = views_around_target(exp.envs[0], texture, float(distance), lateral, offsets)
                 reference_image = torch.from_numpy(reference[None].copy())
                 exp.coder.set_reference(reference_image)
-                baseline = exp.reference_states(reference_image) if exp.uses_reference_states else 0.0
+                baseline = exp.reference_states(reference_image) if exp.uses_reference_states else None
                 row_r, row_e, row_a = [], [], []
                 for offset, frame in zip(offsets, views):
                     out = exp.coder(torch.from_numpy(frame[None].copy()), learn=False)
-                    state = out.state - baseline
-                    if exp.policy.eye_position_dims:
-                        pan = torch.tensor([target + offset], dtype=torch.float64)
-                        state = torch.cat([state, exp.policy.eye_position_feature(pan, lateral)], dim=1)
+                    state = exp.policy_state(out.state, baseline, np.array([target + offset]), lateral)
                     row_r.append(float(out.reward[0]))
                     row_e.append([float(e[0]) for e in out.errors.values()])
                     row_a.append(float(exp.policy.probabilities(state)[0].cpu().numpy() @ actions))
