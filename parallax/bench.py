@@ -66,7 +66,7 @@ def cuda_components(repeats: int) -> dict[str, float]:
     """Median ms of the coder (encode + dictionary update, both scales), the policy's act +
     update and one LM epoch on the GPU, each followed by a device synchronisation."""
     from parallax.coding.benchmark import _coder, _frames
-    from parallax.distance.benchmark import _paper_sized_learner, epoch_from_start
+    from parallax.distance.benchmark import EpochFromStart, _paper_sized_learner
     from parallax.policy.benchmark import NUM_SCALES, STATE_DIM, _pooled_activities
     from parallax.policy.natural_actor_critic import NaturalActorCritic
 
@@ -89,8 +89,8 @@ def cuda_components(repeats: int) -> dict[str, float]:
             action = policy.act(states)
             policy.update(states, action, rewards, states, valid)
         operations[f"policy_act_update_B{batch}_ms"] = _synchronised(act_update, "cuda")
-    restore, epoch = epoch_from_start(_paper_sized_learner().to("cuda"))
-    operations["lm_epoch_ms"] = _synchronised(lambda: (restore(), epoch()), "cuda")
+    timed = EpochFromStart(_paper_sized_learner().to("cuda"))
+    operations["lm_epoch_ms"] = _synchronised(lambda: (timed.restore(), timed.epoch()), "cuda")
     return interleaved_medians_ms(operations, repeats, warmup=5)
 
 

@@ -68,29 +68,31 @@ def _scipy_fit(optimizer: LevenbergMarquardt, inputs: torch.Tensor, targets: tor
     return elapsed, 2.0 * float(solution.cost), int(solution.njev)
 
 
-def epoch_from_start(learner: DistanceLearner) -> tuple[Callable[[], None], Callable[[], None]]:
-    """(restore, epoch) for timing one LM epoch of ``learner`` on its own queue, on its device:
-    ``restore`` puts the parameters and μ back where they are now, ``epoch`` runs one epoch."""
-    optimizer = learner.optimizer
-    inputs, targets = learner.queue.inputs * learner.weights, learner.queue.targets
-    start, start_mu = optimizer._flat().clone(), optimizer.mu
+class EpochFromStart:
+    """One LM epoch of ``learner`` on its own queue, on its device, timed from a fixed start:
+    :meth:`restore` puts the parameters and μ back where they were at construction, :meth:`epoch`
+    runs one epoch. The weighted inputs, targets and start are kept for the other timings."""
 
-    def restore() -> None:
-        optimizer._write(start)
-        optimizer.mu = start_mu
+    def __init__(self, learner: DistanceLearner) -> None:
+        self.optimizer = learner.optimizer
+        self.inputs, self.targets = learner.queue.inputs * learner.weights, learner.queue.targets
+        self.start, self.start_mu = self.optimizer._flat().clone(), self.optimizer.mu
 
-    def epoch() -> None:
-        optimizer.step(_regression_residuals, inputs, targets, per_sample=True)
-    return restore, epoch
+    def restore(self) -> None:
+        self.optimizer._write(self.start)
+        self.optimizer.mu = self.start_mu
+
+    def epoch(self) -> None:
+        self.optimizer.step(_regression_residuals, self.inputs, self.targets, per_sample=True)
 
 
 def run(repeats: int = 50) -> dict[str, float]:
     """Median milliseconds per operation, plus the SciPy comparison (see the module docstring)."""
     learner = _paper_sized_learner()
-    optimizer = learner.optimizer
-    inputs, targets = learner.queue.inputs * learner.weights, learner.queue.targets
-    start, start_mu = optimizer._flat().clone(), optimizer.mu
-    restore, epoch = epoch_from_start(learner)
+    timed = EpochFromStart(learner)
+    optimizer, inputs, targets = timed.optimizer, timed.inputs, timed.targets
+    start, start_mu = timed.start, timed.start_mu
+    restore, epoch = timed.restore, timed.epoch
 
     def jacobian() -> None:
         optimizer._jacobian(start, _regression_residuals, (inputs, targets), True)
