@@ -3,7 +3,7 @@
 # simulations), with the budgets of the committed report docs/results/README.md (a 2-core CPU,
 # about 1.5 hours with both cores busy):
 #   single lateral positions 5, 7, 10, 13, 15, 20 cm     400 presentations (12 000 iterations)
-#   multiple positions 5–10 cm                            200 presentations (36 000 iterations)
+#   multiple positions 5–10 cm                            300 presentations (54 000 iterations)
 #   multiple positions 5–20 cm with weighting             200 presentations (96 000 iterations),
 #                                                         queue c = 100
 # In every run the last third (the last half for the single and 5–10 cm runs, as in
@@ -17,7 +17,11 @@
 # Since session 5 every run also uses settings beyond the paper, chosen on probes
 # (docs/results/beyond_the_paper.md): the policy's state relative to the zero-disparity view,
 # trials starting from a random pan in ±2°, weight decay 0.1 in the LM fit, and (session 6) the
-# eye's own pan as one more policy feature.
+# eye's own pan as one more policy feature. Since session 7 the random start ends after a
+# warm-up (train.start_jitter_presentations: 100 single, 50 for 5–10 cm, 33 for 5–20 cm), so the
+# last 100 trials before the perturbation, which Table 2 averages, start from pan 0 as the
+# paper's did; the 5–10 cm runs got 300 presentations so that their 150 before the perturbation
+# hold the warm-up and those 100 trials.
 # Extra arguments are Hydra overrides for every training job (they come last, so e.g.
 # train.presentations=2000 lengthens every run). Environment: launch/ablation_lib.sh, plus
 #   EVAL_ARGS      parallax-eval options (default: the grid 3.0, 3.5, …, 10.0 m, one held-out texture each)
@@ -33,11 +37,13 @@ seeds="seed=${SEEDS:-0,1,2}"
 read -ra improvements <<< "${IMPROVEMENTS-policy.feature_norm=difference env.initial_pan_jitter_deg=2 distance.lm.weight_decay=0.1 policy.eye_position_reference_m=0.5}"
 singles=paper_single_5,paper_single_7,paper_single_10,paper_single_13,paper_single_15,paper_single_20
 status=0
-px_sweep "$sweep" "experiment=$singles" "$seeds" train.presentations=400 "${improvements[@]}" "$@" || status=$?
-px_sweep "$sweep" experiment=paper_multi_5_10 "$seeds" train.presentations=200 "${improvements[@]}" "$@" \
-  || status=$?
+px_sweep "$sweep" "experiment=$singles" "$seeds" train.presentations=400 train.start_jitter_presentations=100 \
+  "${improvements[@]}" "$@" || status=$?
+px_sweep "$sweep" experiment=paper_multi_5_10 "$seeds" train.presentations=300 train.start_jitter_presentations=50 \
+  "${improvements[@]}" "$@" || status=$?
 px_sweep "$sweep" experiment=paper_multi_5_20_weighted "$seeds" train.presentations=200 \
-  distance.queue_size=100 perturbation.start_fraction=0.6667 "${improvements[@]}" "$@" || status=$?
+  train.start_jitter_presentations=33 distance.queue_size=100 perturbation.start_fraction=0.6667 \
+  "${improvements[@]}" "$@" || status=$?
 
 mapfile -t weighted < <(px_runs_with "$sweep" experiment=paper_multi_5_20_weighted)
 mapfile -t five_ten < <(px_runs_with "$sweep" experiment=paper_multi_5_10)

@@ -109,7 +109,8 @@ def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
 #: setting neither blocks resuming old runs nor makes it look like an ablation in a report.
 SETTINGS_ADDED_LATER: dict[str, Any] = {"distance.outlier_mads": None, "distance.lm.weight_decay": 0.0,
                                          "env.initial_pan_jitter_deg_per_m": 0.0,
-                                         "policy.eye_position_reference_m": 0.0}
+                                         "policy.eye_position_reference_m": 0.0,
+                                         "train.start_jitter_presentations": None}
 
 
 def run_settings(config: dict) -> dict[str, Any]:
@@ -139,6 +140,14 @@ def perturbation_start(cfg) -> int | None:
     if fraction is None or total is None:
         return None
     return int(round(float(fraction) * int(total)))
+
+
+def start_jitter_on(cfg, presentation: int) -> bool:
+    """Whether presentation ``presentation`` (0-based) starts its trials from the jittered pan of
+    ``env.initial_pan_jitter_deg…``: always when ``train.start_jitter_presentations`` is null,
+    else only before that many presentations (the trainer and parallax-eval both use this)."""
+    limit = (cfg.get("train") or {}).get("start_jitter_presentations")
+    return limit is None or int(presentation) < int(limit)
 
 
 def _require(cond: bool, key: str, reason: str) -> None:
@@ -180,6 +189,10 @@ def validate(cfg: DictConfig) -> None:
     _require(int(cfg.metrics.mae_window) >= 1, "metrics.mae_window", f"must be ≥ 1, got {cfg.metrics.mae_window}")
     _require(cfg.device in ("cpu", "cuda") or str(cfg.device).startswith("cuda:"), "device",
              f"must be cpu or cuda, got {cfg.device!r}")
+    jitter_limit = cfg.train.get("start_jitter_presentations")
+    _require(jitter_limit is None or (isinstance(jitter_limit, int) and not isinstance(jitter_limit, bool)
+                                      and jitter_limit >= 0), "train.start_jitter_presentations",
+             f"must be null or a whole number of presentations ≥ 0, got {jitter_limit!r}")
     start = cfg.perturbation.get("start_fraction")
     if start is not None:
         _require(0.0 <= float(start) <= 1.0, "perturbation.start_fraction",

@@ -9,6 +9,9 @@ beyond the paper, at distances between the grid points — and we measure:
 - the distance error per range 3–4.9, 5–6.9, 7–10 m and total (Tables 4–5), from s of the
   greedy policy.
 
+Trials start as the run's last training presentations did (pan 0 as in the paper, or a random
+pan with ``env.initial_pan_jitter_deg…``); ``--start-jitter on|off`` chooses.
+
 Writes `eval.json` and figures (`eval_mae_per_position.png`, `eval_error_vs_distance.png`,
 `mae_curves.png`) into the run directory (or --out).
 """
@@ -24,7 +27,7 @@ import numpy as np
 import torch
 
 from parallax import checkpoint, plots
-from parallax.config import load_run_config, perturbation_start
+from parallax.config import load_run_config, perturbation_start, start_jitter_on
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
 
@@ -77,7 +80,9 @@ def distance_results(learner, pans: np.ndarray, distances: np.ndarray) -> dict:
 def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | None = None,
              between: list[float] | None = None, perturbation: str = "auto",
              out: str | Path | None = None, checkpoint_name: str = checkpoint.CHECKPOINT_NAME,
-             device: str | None = None, readout: str = "last") -> dict:
+             device: str | None = None, readout: str = "last", start_jitter: str = "auto") -> dict:
+    if start_jitter not in ("auto", "on", "off"):
+        raise ValueError(f"--start-jitter must be auto, on or off, got {start_jitter!r}")
     if readout not in READOUTS:
         raise ValueError(f"--readout must be one of {', '.join(READOUTS)}, got {readout!r}")
     run_dir = Path(run_dir)
@@ -108,6 +113,10 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
         was_perturbed = start is not None and state["presentation"] > start
         perturbed = {"auto": was_perturbed, "on": True, "off": False}[perturbation]
         exp.set_perturbation(perturbed)
+        # auto: trials start as the checkpoint's last training presentations did (jittered or 0)
+        jittered = {"auto": start_jitter_on(cfg, max(0, int(state["presentation"]) - 1)),
+                    "on": True, "off": False}[start_jitter]
+        exp.set_start_jitter(jittered)
         if not exp.distance.is_ready:
             print("[parallax-eval] the distance learner never trained (queue not full): "
                   "distance errors are left out", file=sys.stderr)
@@ -119,7 +128,7 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
         labels = [position_label(l) for l in exp.lateral_positions]
         result: dict = {"run_dir": str(run_dir), "checkpoint": checkpoint_name,
                         "presentations": int(state["presentation"]), "readout": readout,
-                        "perturbed": perturbed, "textures_per_distance": textures,
+                        "perturbed": perturbed, "start_jitter": jittered, "textures_per_distance": textures,
                         "lateral_positions_cm": labels, "mae_per_position": {}, "mae": {}}
         runs = {}
         for mode, greedy in (("greedy", True), ("sampled", False)):
@@ -191,6 +200,9 @@ def main(argv: list[str] | None = None) -> None:
                         help="extra distances between grid points (default: a few; none to skip)")
     parser.add_argument("--perturbation", choices=["auto", "on", "off"], default="auto",
                         help="auto: as at the end of training")
+    parser.add_argument("--start-jitter", choices=["auto", "on", "off"], default="auto",
+                        help="trials start from the run's env.initial_pan_jitter_deg… (on) or from pan 0 "
+                             "as in the paper (off); auto: as at the end of training")
     parser.add_argument("--out", default=None, help="where to write eval.json and figures (default: run dir)")
     parser.add_argument("--checkpoint", default=checkpoint.CHECKPOINT_NAME,
                         help=f"checkpoint file in the run dir (default {checkpoint.CHECKPOINT_NAME}; "
@@ -204,7 +216,8 @@ def main(argv: list[str] | None = None) -> None:
     try:
         result = evaluate(args.run_dir, textures=args.textures, distances=args.distances,
                           between=args.between, perturbation=args.perturbation, out=args.out,
-                          checkpoint_name=args.checkpoint, device=args.device, readout=args.readout)
+                          checkpoint_name=args.checkpoint, device=args.device, readout=args.readout,
+                          start_jitter=args.start_jitter)
     except (FileNotFoundError, ValueError) as exc:
         print(f"parallax-eval: error: {exc}", file=sys.stderr)
         sys.exit(2)

@@ -42,6 +42,7 @@ class Presentation:
     errors: dict[str, float] = field(default_factory=dict)   # mean reconstruction error per scale
     policy_stats: dict[str, float] = field(default_factory=dict)
     last_view: np.ndarray | None = None  # robot 0's I0 beside its last image (for TensorBoard)
+    start_pans: np.ndarray | None = None  # (B, r) pan at the first iteration of each trial (deg)
 
     @property
     def labels(self) -> list[str]:
@@ -99,6 +100,11 @@ class Experiment:
     def on_final_list(self) -> bool:
         return self.stage == len(self.stages) - 1
 
+    def set_start_jitter(self, on: bool) -> None:
+        """Trials start from the jittered pan of ``env.initial_pan_jitter_deg…`` (on) or from 0."""
+        for env in self.envs:
+            env.task.set_start_jitter(on)
+
     def set_perturbation(self, on: bool) -> None:
         p = self.cfg.perturbation
         for env in self.envs:
@@ -137,7 +143,7 @@ class Experiment:
         obs = [ts.observation for ts in timesteps]
         lateral = list(self.envs[0].task.lateral_positions)
         B, r, t_h = self.robots, len(lateral), self.trial_length
-        pans, targets = np.zeros((B, r)), np.zeros((B, r))
+        pans, targets, start_pans = np.zeros((B, r)), np.zeros((B, r)), np.zeros((B, r))
         best_pans, best_rewards = np.zeros((B, r)), np.full((B, r), -np.inf)
         self.coder.set_reference(self._images(obs, "reference"))
 
@@ -159,6 +165,8 @@ class Experiment:
             n_enc += 1
             p = int(obs[0]["position_index"])
             current_pans = np.array([float(o["pan"]) for o in obs])
+            if iteration == 0:
+                start_pans[:, p] = current_pans
             rewards = out.reward.cpu().numpy().astype(np.float64)
             better = rewards > best_rewards[:, p]      # ties keep the earlier pan
             best_rewards[better, p] = rewards[better]
@@ -193,7 +201,7 @@ class Experiment:
             steps=steps + 1, reward=reward_sum / n_enc,
             errors={k: v / n_enc for k, v in error_sums.items()},
             policy_stats={k: v / n_updates for k, v in stat_sums.items()} if n_updates else {},
-            last_view=view,
+            last_view=view, start_pans=start_pans,
         )
 
     # --- state -----------------------------------------------------------------------------

@@ -26,7 +26,7 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from parallax import checkpoint
-from parallax.config import RUN_CONFIG_NAME, perturbation_start
+from parallax.config import RUN_CONFIG_NAME, perturbation_start, start_jitter_on
 from parallax.experiment import Experiment, Presentation
 from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, learn_online, position_label
 
@@ -105,7 +105,16 @@ class Trainer:
         if enough and all(mae[k] <= float(cur.advance_below_deg) for k in stage):
             self.exp.set_stage(self.exp.stage + 1)
 
+    @property
+    def start_jitter_on(self) -> bool:
+        """Whether this presentation's trials start from the jittered pan: during the first
+        ``train.start_jitter_presentations`` presentations (null: all of them), then from 0 as in
+        the paper, so that the trials Tables 2–3 measure start as the paper's did."""
+        return start_jitter_on(self.cfg, self.presentation)
+
     def step_presentation(self, keep_view: bool) -> tuple[Presentation, dict]:
+        jittered = self.start_jitter_on
+        self.exp.set_start_jitter(jittered)
         pres = self.exp.run_presentation(learn=True, greedy=False, keep_view=keep_view)
         for b in range(self.exp.robots):
             for p, label in enumerate(pres.labels):
@@ -131,6 +140,8 @@ class Trainer:
             # The eye-movement vectors s and their distances, exactly (JSON floats round-trip), so
             # parallax-replay can re-run the distance learner alone with another y, c or weighting.
             "pans": pres.pans.tolist(), "distances": pres.distances.tolist(),
+            # where each trial started (the paper: 0), and whether it was drawn from the jitter
+            "start_pans": pres.start_pans.tolist(), "start_jitter": jittered,
             "learnt_distance": learnt_distance,
             **{f"lm_{k}": v for k, v in self.last_distance_stats.items()},
         }

@@ -227,6 +227,18 @@ def test_trials_can_start_from_a_jittered_pan_without_touching_the_reference():
         small_env(initial_pan_jitter_deg=-1)
 
 
+def test_the_start_jitter_can_be_switched_off_and_on():
+    env = small_env(trial_length=2, initial_pan_jitter_deg=0.5)
+    assert env.task.start_jitter_enabled
+    env.task.set_start_jitter(False)
+    assert float(env.reset().observation["pan"]) == 0.0          # the paper's start
+    env.task.set_start_jitter(True)
+    assert float(env.reset().observation["pan"]) != 0.0
+    with pytest.raises(ValueError, match="start jitter must be True or False, got 'no'"):
+        env.task.set_start_jitter("no")
+    env.close()
+
+
 def test_the_start_range_can_grow_with_the_lateral_step():
     # 10°/m: ±0.5° at 5 cm, ±2° at 20 cm
     env = small_env(trial_length=2, lateral_positions=[0.05, 0.2], initial_pan_jitter_deg_per_m=10.0)

@@ -68,7 +68,10 @@ def test_same_seed_same_metrics_other_seed_differs(tmp_path, tiny_overrides):
     assert _without_timing(a) != _without_timing(c)
 
 
-@pytest.mark.parametrize("extra", [[], ["policy.feature_norm=difference"]], ids=["shipped", "difference"])
+@pytest.mark.parametrize("extra", [[], ["policy.feature_norm=difference"],
+                                   # the jitter ends after the resume point: the resumed run must switch it off
+                                   ["env.initial_pan_jitter_deg=1", "train.start_jitter_presentations=5"]],
+                         ids=["shipped", "difference", "jitter_until_5"])
 def test_resume_in_process_matches_uninterrupted(tmp_path, tiny_overrides, extra):
     # feature_norm=difference adds one (I0, I0) encode per trial; still same seed, same numbers
     tiny_overrides = tiny_overrides + extra
@@ -79,6 +82,21 @@ def test_resume_in_process_matches_uninterrupted(tmp_path, tiny_overrides, extra
     assert _without_timing(resumed) == _without_timing(full)
     assert ((tmp_path / "part" / "metrics.jsonl").read_text()
             == (tmp_path / "full" / "metrics.jsonl").read_text())
+
+
+def test_the_start_jitter_ends_after_start_jitter_presentations(tmp_path, tiny_overrides):
+    _train(tmp_path, tiny_overrides + ["env.initial_pan_jitter_deg=1", "train.start_jitter_presentations=4"])
+    records = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    assert [r["start_jitter"] for r in records] == [True] * 4 + [False] * 2
+    jittered = [p for r in records[:4] for p in r["start_pans"][0]]
+    assert all(-1.0 <= p <= 1.0 for p in jittered) and len(set(jittered)) == len(jittered)
+    assert all(p == 0.0 for r in records[4:] for p in r["start_pans"][0])   # the paper's start
+    # parallax-eval starts its trials as the end of training did, unless told otherwise
+    from parallax.evaluate import evaluate
+    assert evaluate(tmp_path, distances=[3.0], between=[], out=tmp_path / "e1")["start_jitter"] is False
+    assert evaluate(tmp_path, distances=[3.0], between=[], out=tmp_path / "e2", start_jitter="on")["start_jitter"] is True
+    with pytest.raises(ValueError, match="--start-jitter must be auto, on or off, got 'yes'"):
+        evaluate(tmp_path, distances=[3.0], start_jitter="yes")
 
 
 def _cli(run_dir: Path, overrides: list[str]) -> list[str]:

@@ -103,6 +103,7 @@ class LateralPursuitTask(base.Task):
         self._distances = distances
         self._num_textures = int(num_textures)
         self._pan_reset = bool(pan_reset)
+        self._start_jitter_enabled = True
         self._max_increment = float(max_pan_increment_deg)
         self._forced_texture: int | None = None
         self._forced_distance: float | None = None
@@ -157,6 +158,18 @@ class LateralPursuitTask(base.Task):
         if distance is not None:
             self._forced_distance = check_distance(distance)
 
+    @property
+    def start_jitter_enabled(self) -> bool:
+        """Whether new trials start from a jittered pan (when a jitter is configured)."""
+        return self._start_jitter_enabled
+
+    def set_start_jitter(self, enabled: bool) -> None:
+        """Let trials from the next one on start from the configured jitter (True) or from pan 0 as
+        in the paper (False); the trainer turns it off after ``train.start_jitter_presentations``."""
+        if not isinstance(enabled, (bool, np.bool_)):
+            raise ValueError(f"start jitter must be True or False, got {enabled!r}")
+        self._start_jitter_enabled = bool(enabled)
+
     def set_perturbation(self, camera_rotation_deg: float | None = None, blur_sigma: float | None = None,
                          rotation_axis: str | Sequence[float] | None = None) -> None:
         """Switch the §5 perturbations on or off, immediately (no recompile)."""
@@ -204,9 +217,9 @@ class LateralPursuitTask(base.Task):
         initial_pan_jitter_deg_per_m·|l|) so that the eye also learns from the far side of the
         target (beyond the paper). The part in proportion to the lateral step l keeps the start
         near the target where α* is small (short steps). With no jitter nothing is drawn, so the
-        random stream is the paper setting's."""
+        random stream is the paper setting's, as it is once the jitter is switched off."""
         jitter = self._initial_pan_jitter + self._initial_pan_jitter_per_m * abs(float(lateral_m))
-        if jitter == 0.0:
+        if jitter == 0.0 or not self._start_jitter_enabled:
             return 0.0
         return float(self.random.uniform(-jitter, jitter))
 
