@@ -46,7 +46,7 @@ READOUTS = ("last", "best_reward")
 def run_jobs(exp: Experiment, jobs: list[tuple[float, int]], greedy: bool,
              readout: str = "last") -> dict[str, np.ndarray]:
     """Run one frozen presentation per (distance, texture) job, B robots at a time."""
-    pans, targets, dists = [], [], []
+    pans, targets, dists, starts = [], [], [], []
     B = exp.robots
     for start in range(0, len(jobs), B):
         batch = jobs[start:start + B]
@@ -57,8 +57,20 @@ def run_jobs(exp: Experiment, jobs: list[tuple[float, int]], greedy: bool,
         pans.append((pres.pans if readout == "last" else pres.best_pans)[:len(batch)])
         targets.append(pres.targets[:len(batch)])
         dists.append(pres.distances[:len(batch)])
+        starts.append(pres.start_pans[:len(batch)])
     return {"pans": np.concatenate(pans), "targets": np.concatenate(targets),
-            "distances": np.concatenate(dists)}
+            "distances": np.concatenate(dists), "start_pans": np.concatenate(starts)}
+
+
+def mae_by_start(run: dict[str, np.ndarray]) -> dict[str, float]:
+    """Eye MAE of the trials that started short of α* or on it (the paper's start at pan 0 always
+    does) and of those that started past it (only a random start can), with the share of the latter."""
+    err = np.abs(run["pans"] - run["targets"])
+    past = (run["start_pans"] - run["targets"]) * np.sign(run["targets"]) > 0
+    out = {"share_started_past": float(past.mean())}
+    for name, mask in (("started_short", ~past), ("started_past", past)):
+        out[name] = float(err[mask].mean()) if mask.any() else float("nan")
+    return out
 
 
 def distance_results(learner, pans: np.ndarray, distances: np.ndarray) -> dict:
@@ -136,6 +148,7 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
             err = np.abs(run["pans"] - run["targets"])
             result["mae_per_position"][mode] = {k: float(v) for k, v in zip(labels, err.mean(axis=0))}
             result["mae"][mode] = float(err.mean())
+            result.setdefault("mae_by_start", {})[mode] = mae_by_start(run)
         between_run = None
         if between:
             between_jobs = [(d, i % n_tex) for i, d in enumerate(between)]
@@ -181,6 +194,10 @@ def format_eval(result: dict) -> str:
     for k in result["lateral_positions_cm"]:
         lines.append(f"{k:>14} {result['mae_per_position']['greedy'][k]:>11.3f} "
                      f"{result['mae_per_position']['sampled'][k]:>12.3f}")
+    if result.get("start_jitter") and "mae_by_start" in result:
+        for mode, m in result["mae_by_start"].items():
+            lines.append(f"{mode} MAE of trials that started short of α* {m['started_short']:.3f}°, past it "
+                         f"{m['started_past']:.3f}° ({100 * m['share_started_past']:.0f} % of trials)")
     if "distance" in result:
         lines.append("distance error (%): " + "  ".join(
             f"{k}{'' if k == 'total' else ' m'}: {v:.2f}" for k, v in result["distance"]["by_range"].items()))

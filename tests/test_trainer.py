@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -94,7 +95,22 @@ def test_the_start_jitter_ends_after_start_jitter_presentations(tmp_path, tiny_o
     # parallax-eval starts its trials as the end of training did, unless told otherwise
     from parallax.evaluate import evaluate
     assert evaluate(tmp_path, distances=[3.0], between=[], out=tmp_path / "e1")["start_jitter"] is False
-    assert evaluate(tmp_path, distances=[3.0], between=[], out=tmp_path / "e2", start_jitter="on")["start_jitter"] is True
+    jittered = evaluate(tmp_path, distances=[3.0, 5.0], between=[], out=tmp_path / "e2", start_jitter="on")
+    assert jittered["start_jitter"] is True
+    split = jittered["mae_by_start"]["sampled"]
+    assert 0.0 <= split["share_started_past"] <= 1.0 and split["started_short"] >= 0.0
+
+
+def test_mae_by_start_splits_trials_by_the_side_they_started_on():
+    from parallax.evaluate import mae_by_start
+    # α* = +1° (first robot) and −1° (second, the mirror case); each starts past once and short once
+    run = {"targets": np.array([[1.0, 1.0], [-1.0, -1.0]]),
+           "start_pans": np.array([[1.5, 0.0], [-0.5, -2.0]]),
+           "pans": np.array([[3.0, 1.1], [-1.2, -1.0]])}
+    split = mae_by_start(run)
+    assert split["share_started_past"] == 0.5
+    assert split["started_past"] == pytest.approx((2.0 + 0.0) / 2)    # 1.5 and −2.0 started past
+    assert split["started_short"] == pytest.approx((0.1 + 0.2) / 2)
     with pytest.raises(ValueError, match="--start-jitter must be auto, on or off, got 'yes'"):
         evaluate(tmp_path, distances=[3.0], start_jitter="yes")
 
