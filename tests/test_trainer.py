@@ -99,6 +99,8 @@ def test_the_start_jitter_ends_after_start_jitter_presentations(tmp_path, tiny_o
     assert jittered["start_jitter"] is True
     split = jittered["mae_by_start"]["sampled"]
     assert 0.0 <= split["share_started_past"] <= 1.0 and split["started_short"] >= 0.0
+    with pytest.raises(ValueError, match="--start-jitter must be auto, on or off, got 'yes'"):
+        evaluate(tmp_path, distances=[3.0], start_jitter="yes")
 
 
 def test_mae_by_start_splits_trials_by_the_side_they_started_on():
@@ -111,8 +113,6 @@ def test_mae_by_start_splits_trials_by_the_side_they_started_on():
     assert split["share_started_past"] == 0.5
     assert split["started_past"] == pytest.approx((2.0 + 0.0) / 2)    # 1.5 and −2.0 started past
     assert split["started_short"] == pytest.approx((0.1 + 0.2) / 2)
-    with pytest.raises(ValueError, match="--start-jitter must be auto, on or off, got 'yes'"):
-        evaluate(tmp_path, distances=[3.0], start_jitter="yes")
 
 
 def _cli(run_dir: Path, overrides: list[str]) -> list[str]:
