@@ -105,15 +105,10 @@ class Trainer:
         if enough and all(mae[k] <= float(cur.advance_below_deg) for k in stage):
             self.exp.set_stage(self.exp.stage + 1)
 
-    @property
-    def start_jitter_on(self) -> bool:
-        """Whether this presentation's trials start from the jittered pan: during the first
-        ``train.start_jitter_presentations`` presentations (null: all of them), then from 0 as in
-        the paper, so that the trials Tables 2–3 measure start as the paper's did."""
-        return start_jitter_on(self.cfg, self.presentation)
-
     def step_presentation(self, keep_view: bool) -> tuple[Presentation, dict]:
-        jittered = self.start_jitter_on
+        # the random start pan only during train.start_jitter_presentations, then pan 0 as in the
+        # paper; derived from the count, so a resumed run switches at the same presentation
+        jittered = start_jitter_on(self.cfg, self.presentation)
         self.exp.set_start_jitter(jittered)
         pres = self.exp.run_presentation(learn=True, greedy=False, keep_view=keep_view)
         for b in range(self.exp.robots):
