@@ -110,7 +110,8 @@ def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
 SETTINGS_ADDED_LATER: dict[str, Any] = {"distance.outlier_mads": None, "distance.lm.weight_decay": 0.0,
                                          "env.initial_pan_jitter_deg_per_m": 0.0,
                                          "policy.eye_position_reference_m": 0.0,
-                                         "train.start_jitter_presentations": None}
+                                         "train.start_jitter_presentations": None,
+                                         "train.distance_readout": "last"}
 
 
 def run_settings(config: dict) -> dict[str, Any]:
@@ -140,6 +141,17 @@ def perturbation_start(cfg) -> int | None:
     if fraction is None or total is None:
         return None
     return int(round(float(fraction) * int(total)))
+
+
+#: How a trial's pan becomes a component of s: "last", the pan at its last iteration (the paper's
+#: q_p, eq. 16); "best_reward" (beyond the paper), the pan whose image the coder encoded best
+#: during the trial. The trainer, parallax-replay and parallax-eval share these names.
+DISTANCE_READOUTS = ("last", "best_reward")
+
+
+def distance_readout(cfg) -> str:
+    """The run's ``train.distance_readout`` ("last" for runs saved before it existed)."""
+    return str((cfg.get("train") or {}).get("distance_readout") or "last")
 
 
 def start_jitter_on(cfg, presentation: int) -> bool:
@@ -193,6 +205,9 @@ def validate(cfg: DictConfig) -> None:
     _require(jitter_limit is None or (isinstance(jitter_limit, int) and not isinstance(jitter_limit, bool)
                                       and jitter_limit >= 0), "train.start_jitter_presentations",
              f"must be null or a whole number of presentations ≥ 0, got {jitter_limit!r}")
+    readout = cfg.train.get("distance_readout", "last")
+    _require(readout in DISTANCE_READOUTS, "train.distance_readout",
+             f"must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}")
     start = cfg.perturbation.get("start_fraction")
     if start is not None:
         _require(0.0 <= float(start) <= 1.0, "perturbation.start_fraction",

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from parallax import checkpoint, plots
-from parallax.config import load_run_config, perturbation_start, start_jitter_on
+from parallax.config import DISTANCE_READOUTS, distance_readout, load_run_config, perturbation_start, start_jitter_on
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
 
@@ -37,10 +37,7 @@ def grid(start: float, stop: float, step: float) -> list[float]:
     return [round(start + i * step, 6) for i in range(n)]
 
 
-#: How a trial's pan becomes a component of s: "last", the pan at its last iteration (the
-#: paper's q_p, eq. 16); "best_reward" (beyond the paper), the pan whose image the coder encoded
-#: best during the trial, which a trial that ran away at its end does not spoil.
-READOUTS = ("last", "best_reward")
+READOUTS = DISTANCE_READOUTS
 
 
 def run_jobs(exp: Experiment, jobs: list[tuple[float, int]], greedy: bool,
@@ -92,14 +89,15 @@ def distance_results(learner, pans: np.ndarray, distances: np.ndarray) -> dict:
 def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | None = None,
              between: list[float] | None = None, perturbation: str = "auto",
              out: str | Path | None = None, checkpoint_name: str = checkpoint.CHECKPOINT_NAME,
-             device: str | None = None, readout: str = "last", start_jitter: str = "auto") -> dict:
+             device: str | None = None, readout: str | None = None, start_jitter: str = "auto") -> dict:
     if start_jitter not in ("auto", "on", "off"):
         raise ValueError(f"--start-jitter must be auto, on or off, got {start_jitter!r}")
-    if readout not in READOUTS:
+    if readout is not None and readout not in READOUTS:
         raise ValueError(f"--readout must be one of {', '.join(READOUTS)}, got {readout!r}")
     run_dir = Path(run_dir)
     out_dir = Path(out) if out else run_dir
     cfg = load_run_config(run_dir)
+    readout = readout or distance_readout(cfg)   # by default, s as the run's distance learner saw it
     if device is not None:  # e.g. a run trained on a GPU, evaluated on a machine without one
         if device != "cpu" and not (device == "cuda" or device.startswith("cuda:")):
             raise ValueError(f"--device must be cpu or cuda, got {device!r}")
@@ -226,9 +224,10 @@ def main(argv: list[str] | None = None) -> None:
                              f"{checkpoint.BEFORE_PERTURBATION_NAME} for the state before §5's perturbation)")
     parser.add_argument("--device", default=None,
                         help="cpu or cuda (default: the device the run was trained on)")
-    parser.add_argument("--readout", default="last",
-                        help="last: each trial's last pan, the paper's q_p (default); best_reward "
-                             "(beyond the paper): the pan where the coder's reward was highest")
+    parser.add_argument("--readout", default=None,
+                        help="last: each trial's last pan, the paper's q_p; best_reward (beyond the "
+                             "paper): the pan where the coder's reward was highest (default: the "
+                             "run's train.distance_readout)")
     args = parser.parse_args(argv)
     try:
         result = evaluate(args.run_dir, textures=args.textures, distances=args.distances,

@@ -26,7 +26,7 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from parallax import checkpoint
-from parallax.config import RUN_CONFIG_NAME, perturbation_start, start_jitter_on
+from parallax.config import RUN_CONFIG_NAME, distance_readout, perturbation_start, start_jitter_on
 from parallax.experiment import Experiment, Presentation
 from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, learn_online, position_label
 
@@ -91,7 +91,8 @@ class Trainer:
 
     # --- one presentation ------------------------------------------------------------------
     def _learn_distance(self, pres: Presentation) -> None:
-        stats = learn_online(self.exp.distance, self.dist, pres.pans, pres.distances)
+        pans = pres.best_pans if distance_readout(self.cfg) == "best_reward" else pres.pans
+        stats = learn_online(self.exp.distance, self.dist, pans, pres.distances)
         if stats:
             self.last_distance_stats = stats
 
@@ -135,6 +136,8 @@ class Trainer:
             # The eye-movement vectors s and their distances, exactly (JSON floats round-trip), so
             # parallax-replay can re-run the distance learner alone with another y, c or weighting.
             "pans": pres.pans.tolist(), "distances": pres.distances.tolist(),
+            # each trial's pan where the coder's reward peaked (train.distance_readout=best_reward)
+            "best_pans": pres.best_pans.tolist(),
             # where each trial started (the paper: 0), and whether it was drawn from the jitter
             "start_pans": pres.start_pans.tolist(), "start_jitter": jittered,
             "learnt_distance": learnt_distance,

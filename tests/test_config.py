@@ -36,6 +36,7 @@ def test_every_curriculum_composes(name):
     ("device=tpu", "device"),
     ("train.start_jitter_presentations=-1", "train.start_jitter_presentations"),
     ("train.start_jitter_presentations=0.5", "train.start_jitter_presentations"),
+    ("train.distance_readout=peak", "train.distance_readout"),
 ])
 def test_validate_names_the_key(override, key):
     with pytest.raises(ConfigError) as info:
@@ -88,9 +89,11 @@ def test_a_run_saved_before_a_setting_existed_has_that_settings_old_value():
     del saved.env["initial_pan_jitter_deg_per_m"]
     del saved.policy["eye_position_reference_m"]
     del saved.train["start_jitter_presentations"]
+    del saved.train["distance_readout"]
     assert set(SETTINGS_ADDED_LATER) == {"distance.lm.weight_decay", "distance.outlier_mads",
                                          "env.initial_pan_jitter_deg_per_m",
-                                         "policy.eye_position_reference_m", "train.start_jitter_presentations"}
+                                         "policy.eye_position_reference_m", "train.start_jitter_presentations",
+                                         "train.distance_readout"}
     assert changed_settings(saved, current) == []
     assert changed_settings(saved, compose(["distance.lm.weight_decay=0.01"])) == [
         "distance.lm.weight_decay: 0.0 → 0.01"]

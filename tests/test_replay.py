@@ -41,6 +41,27 @@ def test_replay_with_other_settings_changes_the_learner(perturbed_run):
     assert json.dumps(bigger["distance_error"]) != json.dumps(trained["distance_error"])
 
 
+def test_the_best_reward_readout_trains_and_replays_exactly(perturbed_run, tmp_path):
+    # train.distance_readout=best_reward (beyond the paper): the learner is fed each trial's
+    # best-encoded pan. The eye never depends on the learner, so replaying the last-pan run with
+    # the other readout must give exactly the run trained with it.
+    from tests.conftest import train_tiny_run
+
+    best_run = train_tiny_run(tmp_path / "best", [
+        "train.presentations=8", "distance.weighting=true", "distance.y=1.0",
+        "perturbation=rotate_blur", "perturbation.start_fraction=0.5", "train.distance_readout=best_reward"])
+    trained = json.loads((best_run / "summary.json").read_text())
+    last = json.loads((perturbed_run / "summary.json").read_text())
+    assert trained["mae_per_position"] == last["mae_per_position"]          # the same eye
+    assert json.dumps(trained["distance_error"]) != json.dumps(last["distance_error"])
+    replayed = replay(perturbed_run, ["train.distance_readout=best_reward"])["summary"]
+    assert json.dumps(replayed["distance_error"]) == json.dumps(trained["distance_error"])
+    records = [json.loads(line) for line in (best_run / "metrics.jsonl").read_text().splitlines()]
+    assert all(len(r["best_pans"][0]) == len(r["pans"][0]) for r in records)
+    with pytest.raises(ReplayError, match="train.distance_readout must be one of last, best_reward, got 'peak'"):
+        replay(perturbed_run, ["train.distance_readout=peak"])
+
+
 def test_until_perturbation_is_the_unperturbed_run(perturbed_run):
     trained = json.loads((perturbed_run / "summary.json").read_text())
     cut = replay(perturbed_run, until_perturbation=True)

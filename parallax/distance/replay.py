@@ -30,7 +30,7 @@ from typing import Iterable, Sequence
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from parallax.config import RUN_CONFIG_NAME, load_run_config, run_name
+from parallax.config import DISTANCE_READOUTS, RUN_CONFIG_NAME, distance_readout, load_run_config, run_name
 from parallax.experiment import seeds_for
 from parallax.metrics import DistanceErrorTracker, learn_online
 from parallax.report import METRICS_NAME, SUMMARY_NAME, ReportError, eval_files, find_run_dirs, read_metrics
@@ -91,6 +91,13 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbatio
     if len(records) < int(summary["presentations"]):
         raise ReplayError(f"{run_dir / METRICS_NAME} has {len(records)} presentations, the summary "
                           f"{summary['presentations']}: the log is incomplete")
+    readout = distance_readout(cfg)
+    if readout not in DISTANCE_READOUTS:
+        raise ReplayError(f"train.distance_readout must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}")
+    key = "best_pans" if readout == "best_reward" else "pans"
+    if records and key not in records[0]:
+        raise ReplayError(f"{run_dir / METRICS_NAME} has no best_pans (the run predates their logging): "
+                          "it can be replayed with train.distance_readout=last only")
     for record in records[: int(summary["presentations"])]:
         if record["perturbed"] and before is None:
             before = tracker.by_range()
@@ -98,9 +105,9 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbatio
             if until_perturbation:
                 break
         if record["learnt_distance"]:
-            learn_online(learner, tracker, record["pans"], record["distances"])
+            learn_online(learner, tracker, record[key], record["distances"])
     cut = until_perturbation and summary.get("before_perturbation") is not None
-    evals = _rescore_evals(run_dir, summary, before_learner, None if cut else learner)
+    evals = _rescore_evals(run_dir, summary, before_learner, None if cut else learner, readout)
     if cut:
         return {**_cut_at_perturbation(cfg, summary, tracker, run_dir, overrides), "evals": evals}
     summary["distance_error"] = tracker.by_range()
@@ -111,11 +118,12 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbatio
     return {"config": cfg, "summary": summary, "evals": evals}
 
 
-def _rescore_evals(run_dir: Path, summary: dict, before_learner, final_learner) -> dict[str, dict]:
+def _rescore_evals(run_dir: Path, summary: dict, before_learner, final_learner,
+                   readout: str = "last") -> dict[str, dict]:
     """The source's parallax-eval results with the distances re-predicted by the replayed
     learners, on the very eye movements the eval recorded (eval.json "samples"); keyed by the
     eval file's path relative to the run. The frozen eye is the source's, so the eye-movement
-    numbers are kept as they are."""
+    numbers are kept as they are. Evals that read s otherwise than ``readout`` are left out."""
     from parallax.evaluate import distance_results
 
     rescored = {}
@@ -123,8 +131,8 @@ def _rescore_evals(run_dir: Path, summary: dict, before_learner, final_learner) 
     for path in eval_files(run_dir):
         result = json.loads(path.read_text())
         samples = _eval_samples(result)
-        if not samples:
-            continue  # an eval from before the samples were kept
+        if not samples or result.get("readout", "last") != readout:
+            continue  # an eval from before the samples were kept, or of s read out otherwise
         at = int(result.get("presentations", -1))
         if result.get("perturbed") or start is None:
             learner = final_learner if at == int(summary["presentations"]) else None
