@@ -37,9 +37,6 @@ def grid(start: float, stop: float, step: float) -> list[float]:
     return [round(start + i * step, 6) for i in range(n)]
 
 
-READOUTS = DISTANCE_READOUTS
-
-
 def run_jobs(exp: Experiment, jobs: list[tuple[float, int]], greedy: bool,
              readout: str = "last") -> dict[str, np.ndarray]:
     """Run one frozen presentation per (distance, texture) job, B robots at a time."""
@@ -92,8 +89,8 @@ def evaluate(run_dir: str | Path, textures: int = 1, distances: list[float] | No
              device: str | None = None, readout: str | None = None, start_jitter: str = "auto") -> dict:
     if start_jitter not in ("auto", "on", "off"):
         raise ValueError(f"--start-jitter must be auto, on or off, got {start_jitter!r}")
-    if readout is not None and readout not in READOUTS:
-        raise ValueError(f"--readout must be one of {', '.join(READOUTS)}, got {readout!r}")
+    if readout is not None and readout not in DISTANCE_READOUTS:
+        raise ValueError(f"--readout must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}")
     run_dir = Path(run_dir)
     out_dir = Path(out) if out else run_dir
     cfg = load_run_config(run_dir)
