@@ -146,7 +146,9 @@ def perturbation_start(cfg) -> int | None:
 #: How a trial's pan becomes a component of s: "last", the pan at its last iteration (the paper's
 #: q_p, eq. 16); "best_reward" (beyond the paper), the pan whose image the coder encoded best
 #: during the trial. The trainer, parallax-replay and parallax-eval share these names.
-DISTANCE_READOUTS = ("last", "best_reward")
+#: Each readout names the Presentation field and the metrics.jsonl key that hold its pans.
+READOUT_PANS = {"last": "pans", "best_reward": "best_pans"}
+DISTANCE_READOUTS = tuple(READOUT_PANS)
 
 
 def distance_readout(cfg) -> str:

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from parallax import checkpoint, plots
-from parallax.config import DISTANCE_READOUTS, distance_readout, load_run_config, perturbation_start, start_jitter_on
+from parallax.config import DISTANCE_READOUTS, READOUT_PANS, distance_readout, load_run_config, perturbation_start, start_jitter_on
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
 
@@ -48,7 +48,7 @@ def run_jobs(exp: Experiment, jobs: list[tuple[float, int]], greedy: bool,
         for env, (d, tex) in zip(exp.envs, padded):
             env.task.set_next_stimulus(texture_index=tex, distance=d)
         pres = exp.run_presentation(learn=False, greedy=greedy)
-        pans.append((pres.pans if readout == "last" else pres.best_pans)[:len(batch)])
+        pans.append(getattr(pres, READOUT_PANS[readout])[:len(batch)])
         targets.append(pres.targets[:len(batch)])
         dists.append(pres.distances[:len(batch)])
         starts.append(pres.start_pans[:len(batch)])

@@ -26,7 +26,7 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from parallax import checkpoint
-from parallax.config import RUN_CONFIG_NAME, distance_readout, perturbation_start, start_jitter_on
+from parallax.config import READOUT_PANS, RUN_CONFIG_NAME, distance_readout, perturbation_start, start_jitter_on
 from parallax.experiment import Experiment, Presentation
 from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, learn_online, position_label
 
@@ -91,7 +91,7 @@ class Trainer:
 
     # --- one presentation ------------------------------------------------------------------
     def _learn_distance(self, pres: Presentation) -> None:
-        pans = pres.best_pans if distance_readout(self.cfg) == "best_reward" else pres.pans
+        pans = getattr(pres, READOUT_PANS[distance_readout(self.cfg)])
         stats = learn_online(self.exp.distance, self.dist, pans, pres.distances)
         if stats:
             self.last_distance_stats = stats

@@ -30,7 +30,7 @@ from typing import Iterable, Sequence
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from parallax.config import DISTANCE_READOUTS, RUN_CONFIG_NAME, distance_readout, load_run_config, run_name
+from parallax.config import DISTANCE_READOUTS, READOUT_PANS, RUN_CONFIG_NAME, distance_readout, load_run_config, run_name
 from parallax.experiment import seeds_for
 from parallax.metrics import DistanceErrorTracker, learn_online
 from parallax.report import METRICS_NAME, SUMMARY_NAME, ReportError, eval_files, find_run_dirs, read_metrics
@@ -94,7 +94,7 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbatio
     readout = distance_readout(cfg)
     if readout not in DISTANCE_READOUTS:
         raise ReplayError(f"train.distance_readout must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}")
-    key = "best_pans" if readout == "best_reward" else "pans"
+    key = READOUT_PANS[readout]
     if records and key not in records[0]:
         raise ReplayError(f"{run_dir / METRICS_NAME} has no best_pans (the run predates their logging): "
                           "it can be replayed with train.distance_readout=last only")
