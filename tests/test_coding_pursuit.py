@@ -186,7 +186,7 @@ def _realistic_patches(dtype: torch.dtype) -> torch.Tensor:
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-@pytest.mark.parametrize("atoms", [N, 37, 5])   # whole vector lanes, a tail, only a tail
+@pytest.mark.parametrize("atoms", [N, 75, 37, 5])   # whole vectors, and 4-vector blocks with a vector and a tail after them, a tail, only a tail
 def test_fused_kernel_is_bit_identical_to_the_torch_loop_on_random_data(compiled, dtype, atoms) -> None:
     dictionary = _unit_rows(atoms, K, seed=20, dtype=dtype)
     correlations = _unit_rows(200, K, seed=21, dtype=dtype) @ dictionary.T
@@ -273,6 +273,26 @@ def test_fused_kernels_give_the_torch_codes_residuals_and_gradient_bit_for_bit(c
             gradient_step_(copy, codes["torch"], 0.2, kernel=kernel)
             stepped.append(copy)
         assert torch.equal(stepped[0], stepped[1]) and not torch.equal(stepped[0], dictionary)
+
+
+def test_the_gradient_of_chunks_of_patches_is_that_of_all_of_them_bit_for_bit(compiled) -> None:
+    # A lockstep encodes its robots chunk by chunk and takes one dictionary step from all chunks.
+    from parallax.coding.dictionary import codes_times_residuals, gradient_step_
+    from parallax.coding.pursuit import SparseCode
+
+    dictionary = random_dictionary(N, K, torch.Generator().manual_seed(31))
+    patches = _realistic_patches(torch.float32)
+    chunks = [matching_pursuit(part, dictionary, SPARSITY) for part in (patches[:200], patches[200:201],
+                                                                     patches[201:])]
+    whole = SparseCode(*(torch.cat([getattr(chunk, field) for chunk in chunks])
+                         for field in ("atom_indices", "coefficients", "codes", "residuals")))
+    for kernel in ("torch", "cpp"):
+        assert torch.equal(codes_times_residuals(chunks, N, kernel=kernel),
+                           codes_times_residuals(whole, N, kernel=kernel)), kernel
+        stepped_whole, stepped_chunks = dictionary.clone(), dictionary.clone()
+        gradient_step_(stepped_whole, whole, 0.2, kernel=kernel)
+        gradient_step_(stepped_chunks, chunks, 0.2, kernel=kernel)
+        assert torch.equal(stepped_chunks, stepped_whole), kernel
 
 
 def test_half_precision_takes_the_torch_code_even_when_the_kernels_are_asked_for(compiled) -> None:

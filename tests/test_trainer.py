@@ -216,13 +216,14 @@ def test_best_pans_are_the_pans_where_the_reward_peaked(tmp_path, tiny_overrides
     exp = trainer.exp
     physics = exp.envs[0].physics
     seen = []   # (position index, pan, reward) of every encoded image
-    forward = type(exp.coder).forward
+    encode = type(exp.coder).encode
 
-    def recording_forward(self, images, learn=None):
-        out = forward(self, images, learn)
+    def recording_encode(self, images, robots=slice(None)):
+        encoding = encode(self, images, robots)
         if images.shape[0] == 1 and not torch.equal(images, self._last_reference):
-            seen.append((round(physics.lateral_position(), 6), physics.pan_deg(), float(out.reward[0])))
-        return out
+            seen.append((round(physics.lateral_position(), 6), physics.pan_deg(),
+                         float(encoding.output.reward[0])))
+        return encoding
 
     set_reference = type(exp.coder).set_reference
 
@@ -230,7 +231,7 @@ def test_best_pans_are_the_pans_where_the_reward_peaked(tmp_path, tiny_overrides
         self._last_reference = torch.as_tensor(reference).clone()
         return set_reference(self, reference)
 
-    monkeypatch.setattr(type(exp.coder), "forward", recording_forward)
+    monkeypatch.setattr(type(exp.coder), "encode", recording_encode)
     monkeypatch.setattr(type(exp.coder), "set_reference", remembering_set_reference)
     try:
         pres = exp.run_presentation(learn=False, greedy=False)

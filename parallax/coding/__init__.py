@@ -5,14 +5,14 @@ its parts, exported for tests, notebooks and the benchmark (``parallax.coding.be
 """
 
 from .atoms import atom_grid, save_png
-from .coder import CoderOutput, MultiScaleCoder, scale_seed
+from .coder import CoderOutput, Encoding, MultiScaleCoder, scale_seed
 from .dictionary import gradient_step_, pooled_activity, random_dictionary, reconstruction_error
 from .pursuit import SparseCode, gram_matrix, matching_pursuit, matching_pursuit_recompute
 from .retina import ScaleSpec, as_gray_batch, scale_patches, stack_pair, zero_mean_unit_norm
 from .scale import ScaleCoder, ScaleOutput
 
 __all__ = [
-    "CoderOutput", "MultiScaleCoder", "ScaleCoder", "ScaleOutput", "ScaleSpec", "SparseCode",
+    "CoderOutput", "Encoding", "MultiScaleCoder", "ScaleCoder", "ScaleOutput", "ScaleSpec", "SparseCode",
     "as_gray_batch", "atom_grid", "gradient_step_", "gram_matrix", "matching_pursuit",
     "matching_pursuit_recompute", "pooled_activity", "random_dictionary", "reconstruction_error",
     "save_png", "scale_patches", "scale_seed", "stack_pair", "zero_mean_unit_norm",

@@ -22,6 +22,7 @@ import torch
 from torch import nn
 
 from .atoms import atom_grid
+from .pursuit import SparseCode
 from .retina import ScaleSpec, as_gray_batch, check_normalisation
 from .scale import ScaleCoder
 
@@ -33,6 +34,23 @@ class CoderOutput:
     state: torch.Tensor                  # (B, atoms·len(scales)) θ, scales in configured order
     reward: torch.Tensor                 # (B,) −Σ_j e^j
     errors: dict[str, torch.Tensor]      # scale → (B,) e^j
+
+    @staticmethod
+    def join(outputs: Sequence["CoderOutput"]) -> "CoderOutput":
+        """The outputs of consecutive chunks of robots as one output for all of them."""
+        return CoderOutput(state=torch.cat([o.state for o in outputs]),
+                           reward=torch.cat([o.reward for o in outputs]),
+                           errors={scale: torch.cat([o.errors[scale] for o in outputs])
+                                   for scale in outputs[0].errors})
+
+
+@dataclass
+class Encoding:
+    """An encoding before any dictionary update: its output, and per scale the sparse code that
+    :meth:`MultiScaleCoder.learn_from` takes the dictionary step with."""
+
+    output: CoderOutput
+    codes: dict[str, SparseCode]
 
 
 def scale_seed(seed: int, scale: str) -> int:
@@ -122,18 +140,39 @@ class MultiScaleCoder(nn.Module):
             self.coders[name].set_reference(gray)
 
     @torch.no_grad()
+    def encode(self, images: Any, robots: slice = slice(None)) -> Encoding:
+        """Encode I(t) against the cached I0 of ``robots`` (all by default), without learning.
+
+        A lockstep may encode its robots chunk by chunk as their frames arrive and then learn from
+        all the chunks at once: the outputs and the dictionary step are those of one call.
+        """
+        gray = as_gray_batch(images, self.device)
+        encoded = {name: self.coders[name].encode_images(gray, robots) for name in self.scales}
+        errors = {name: output.error for name, (output, _) in encoded.items()}
+        state = torch.cat([encoded[name][0].activity for name in self.scales], dim=1)
+        reward = -torch.stack(list(errors.values())).sum(dim=0)
+        return Encoding(output=CoderOutput(state=state, reward=reward, errors=errors),
+                        codes={name: code for name, (_, code) in encoded.items()})
+
+    @torch.no_grad()
+    def learn_from(self, encodings: Encoding | Sequence[Encoding]) -> None:
+        """One dictionary step per scale from an encoding, or from the encodings of consecutive
+        chunks of robots in robot order (exactly the step of their joint encoding)."""
+        chunks = [encodings] if isinstance(encodings, Encoding) else list(encodings)
+        for name in self.scales:
+            self.coders[name].learn_from([chunk.codes[name] for chunk in chunks])
+
+    @torch.no_grad()
     def forward(self, images: Any, learn: bool | None = None) -> CoderOutput:
         """Encode I(t) against the cached I0; with learning on, then one dictionary step per scale.
 
         The outputs are those of the encoding before the update.
         """
         learn = self.learn if learn is None else bool(learn)
-        gray = as_gray_batch(images, self.device)
-        outputs = {name: self.coders[name](gray, learn) for name in self.scales}
-        errors = {name: output.error for name, output in outputs.items()}
-        state = torch.cat([outputs[name].activity for name in self.scales], dim=1)
-        reward = -torch.stack(list(errors.values())).sum(dim=0)
-        return CoderOutput(state=state, reward=reward, errors=errors)
+        encoding = self.encode(images)
+        if learn:
+            self.learn_from(encoding)
+        return encoding.output
 
     def atom_grid(self, scale: str, **options: Any) -> np.ndarray:
         """uint8 (H, W) picture of ``scale``'s atoms as (I0-half | I(t)-half) pairs; see

@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -38,24 +40,37 @@ def normalise_atoms_(dictionary: torch.Tensor) -> torch.Tensor:
     return dictionary.div_(norms)
 
 
-def codes_times_residuals(code: SparseCode, n_atoms: int, kernel: str | None = None) -> torch.Tensor:
+def codes_times_residuals(code: SparseCode | Sequence[SparseCode], n_atoms: int,
+                          kernel: str | None = None) -> torch.Tensor:
     """Bᵀ·R, (N, K): for every atom, the coefficient-weighted sum of the residuals of the patches
     that picked it. Grouping the M·k picks by atom costs M·k·K instead of the dense N·M·K.
 
-    On the CPU a compiled kernel adds up the same terms in the same order (``kernel``: see
-    :mod:`parallax.coding.native`); elsewhere, or without it, ``embedding_bag`` does."""
-    compiled = native.kernels_for(kernel, code.residuals)
+    ``code`` may be a list of codes of consecutive chunks of patches (the robots of a lockstep,
+    encoded one after another): the result is that of their concatenation, bit for bit.
+
+    On the CPU a compiled kernel adds up the same terms in the same order, chunk after chunk into
+    one product (``kernel``: see :mod:`parallax.coding.native`); elsewhere, or without it,
+    ``embedding_bag`` does, on the concatenated chunks."""
+    chunks = [code] if isinstance(code, SparseCode) else list(code)
+    compiled = native.kernels_for(kernel, chunks[0].residuals)
     if compiled is not None:
-        return compiled.codes_times_residuals(code.atom_indices.contiguous(), code.coefficients.contiguous(),
-                                              code.residuals.contiguous(), n_atoms)
-    picks = code.atom_indices.reshape(-1)
+        product = None
+        for chunk in chunks:
+            product = compiled.codes_times_residuals(chunk.atom_indices.contiguous(),
+                                                     chunk.coefficients.contiguous(),
+                                                     chunk.residuals.contiguous(), n_atoms, product)
+        return product
+    atom_indices = torch.cat([chunk.atom_indices for chunk in chunks])
+    coefficients = torch.cat([chunk.coefficients for chunk in chunks])
+    residuals = torch.cat([chunk.residuals for chunk in chunks])
+    picks = atom_indices.reshape(-1)
     order = _stable_order(picks, n_atoms)
     counts = torch.bincount(picks, minlength=n_atoms)
     offsets = torch.zeros_like(counts)
     offsets[1:] = torch.cumsum(counts, 0)[:-1]
-    patch_of_pick = torch.div(order, code.atom_indices.shape[1], rounding_mode="floor")
-    return F.embedding_bag(patch_of_pick, code.residuals, offsets=offsets, mode="sum",
-                           per_sample_weights=code.coefficients.reshape(-1)[order])
+    patch_of_pick = torch.div(order, atom_indices.shape[1], rounding_mode="floor")
+    return F.embedding_bag(patch_of_pick, residuals, offsets=offsets, mode="sum",
+                           per_sample_weights=coefficients.reshape(-1)[order])
 
 
 def _stable_order(picks: torch.Tensor, n_atoms: int) -> torch.Tensor:
@@ -67,13 +82,15 @@ def _stable_order(picks: torch.Tensor, n_atoms: int) -> torch.Tensor:
 
 
 @torch.no_grad()
-def gradient_step_(dictionary: torch.Tensor, code: SparseCode, learning_rate: float,
-                   kernel: str | None = None) -> None:
-    """One step of gradient descent on ½‖γ − Φᵀb‖² averaged over the P coded patches, in place."""
-    patches = code.residuals.shape[0]
+def gradient_step_(dictionary: torch.Tensor, code: SparseCode | Sequence[SparseCode],
+                   learning_rate: float, kernel: str | None = None) -> None:
+    """One step of gradient descent on ½‖γ − Φᵀb‖² averaged over the P coded patches, in place
+    (``code``: one code, or the codes of consecutive chunks of the patches)."""
+    chunks = [code] if isinstance(code, SparseCode) else list(code)
+    patches = sum(chunk.residuals.shape[0] for chunk in chunks)
     if patches == 0:
         return
-    dictionary.add_(codes_times_residuals(code, dictionary.shape[0], kernel),
+    dictionary.add_(codes_times_residuals(chunks, dictionary.shape[0], kernel),
                     alpha=learning_rate / patches)
     normalise_atoms_(dictionary)
 

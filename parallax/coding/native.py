@@ -105,7 +105,7 @@ def _self_check(module: ModuleType) -> None:
 
     generator = torch.Generator().manual_seed(0)
     for dtype in (torch.float32, torch.float64):
-        for atoms in (40, 37):   # whole vector lanes, and a tail after them
+        for atoms in (40, 37, 75):   # whole vectors, a tail after them, and both after 4-vector blocks
             dictionary = torch.randn(atoms, 12, generator=generator, dtype=dtype)
             dictionary /= dictionary.norm(dim=1, keepdim=True)
             patches = torch.randn(64, 12, generator=generator, dtype=dtype)

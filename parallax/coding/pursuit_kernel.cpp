@@ -231,9 +231,11 @@ std::vector<at::Tensor> codes_and_residuals(const at::Tensor& patches, const at:
 }
 
 // Bᵀ·R, (N, K): for every atom, Σ c·r_i over the picks of that atom in (patch, step) order, from
-// the (M, k) picks and the (M, K) residuals.
+// the (M, k) picks and the (M, K) residuals. With ``out`` the sums are added to it, in place:
+// calls on consecutive chunks of patches then add up exactly as one call on all of them.
 at::Tensor codes_times_residuals(const at::Tensor& picks, const at::Tensor& coefficients,
-                                 const at::Tensor& residuals, int64_t n_atoms) {
+                                 const at::Tensor& residuals, int64_t n_atoms,
+                                 c10::optional<at::Tensor> out) {
   check_cpu_contiguous(residuals, "residuals");
   TORCH_CHECK(residuals.dim() == 2, "residuals must be (M, K)");
   TORCH_CHECK(coefficients.scalar_type() == residuals.scalar_type(),
@@ -242,7 +244,16 @@ at::Tensor codes_times_residuals(const at::Tensor& picks, const at::Tensor& coef
   const int64_t rows = residuals.size(0), dim = residuals.size(1);
   check_picks(picks, coefficients, rows, n_atoms);
   const int64_t sparsity = picks.size(1);
-  at::Tensor product = at::zeros({n_atoms, dim}, residuals.options());
+  at::Tensor product;
+  if (out.has_value()) {
+    product = *out;
+    check_cpu_contiguous(product, "out");
+    TORCH_CHECK(product.scalar_type() == residuals.scalar_type() && product.dim() == 2 &&
+                    product.size(0) == n_atoms && product.size(1) == dim,
+                "out must be (N, K) in the residuals' dtype");
+  } else {
+    product = at::zeros({n_atoms, dim}, residuals.options());
+  }
   AT_DISPATCH_FLOATING_TYPES(residuals.scalar_type(), "codes_times_residuals", [&] {
     const int64_t* p = picks.data_ptr<int64_t>();
     const scalar_t* w = coefficients.data_ptr<scalar_t>();
@@ -267,12 +278,17 @@ at::Tensor codes_times_residuals(const at::Tensor& picks, const at::Tensor& coef
 
 }  // namespace
 
+// The GIL is released while they run: they touch tensors only, and the world renders the next
+// frames on another thread meanwhile (parallax.envs.rendering).
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
+  using release_gil = py::call_guard<py::gil_scoped_release>;
   m.def("gram_pursuit", &gram_pursuit,
         "k steps of Gram-form matching pursuit, patch by patch (paper eq. 1); "
-        "correlations are updated in place");
+        "correlations are updated in place", release_gil());
   m.def("codes_and_residuals", &codes_and_residuals,
-        "dense (M, N) codes and (M, K) residuals from the pursuit's picks");
+        "dense (M, N) codes and (M, K) residuals from the pursuit's picks", release_gil());
   m.def("codes_times_residuals", &codes_times_residuals,
-        "the dictionary gradient's B^T R, (N, K), from the picks and the residuals");
+        "the dictionary gradient's B^T R, (N, K), from the picks and the residuals; added to "
+        "out when given", py::arg("picks"), py::arg("coefficients"), py::arg("residuals"),
+        py::arg("n_atoms"), py::arg("out") = py::none(), release_gil());
 }

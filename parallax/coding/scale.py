@@ -10,6 +10,7 @@ dictionary with every patch of every image of the call. The I0 patches are cut o
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import torch
 from torch import nn
@@ -74,14 +75,16 @@ class ScaleCoder(nn.Module):
         raw = scale_patches(gray.to(self.dictionary.device), self.spec)
         self.reference = prepare_reference(raw, self.normalisation)
 
-    def patch_pairs(self, gray: torch.Tensor) -> torch.Tensor:
-        """γ for every patch: (B,H,W) gray current images → (B, P, K) [I0 half ; I(t) half]."""
+    def patch_pairs(self, gray: torch.Tensor, robots: slice = slice(None)) -> torch.Tensor:
+        """γ for every patch: (B,H,W) gray current images → (B, P, K) [I0 half ; I(t) half];
+        ``robots`` picks the references the images belong to (all of them by default)."""
         if self.reference is None:
             raise RuntimeError("no reference image: call set_reference(I0) before encoding")
-        if gray.shape[0] != self.reference.shape[0]:
-            raise ValueError(f"got {gray.shape[0]} images for {self.reference.shape[0]} references")
+        reference = self.reference[robots]
+        if gray.shape[0] != reference.shape[0]:
+            raise ValueError(f"got {gray.shape[0]} images for {reference.shape[0]} references")
         raw = scale_patches(gray.to(self.dictionary.device), self.spec)
-        return stack_pair(self.reference, raw, self.normalisation)
+        return stack_pair(reference, raw, self.normalisation)
 
     def encode(self, patches: torch.Tensor) -> SparseCode:
         """Matching pursuit (eq. 1) of (M, K) patches on the current dictionary."""
@@ -91,19 +94,32 @@ class ScaleCoder(nn.Module):
                                 kernel=_KERNELS[self.pursuit])
 
     @torch.no_grad()
-    def learn_from(self, code: SparseCode) -> None:
-        """One gradient step with all the coded patches, then unit-norm atoms again."""
+    def learn_from(self, code: SparseCode | Sequence[SparseCode]) -> None:
+        """One gradient step with all the coded patches (one code, or the codes of consecutive
+        chunks of robots, in order), then unit-norm atoms again."""
         gradient_step_(self.dictionary, code, self.learning_rate, kernel=_KERNELS.get(self.pursuit))
+        if self.pursuit != "recompute":
+            # The next encoding's Gram matrix, now: in a lockstep this runs while the world
+            # renders the next frames (parallax.experiment).
+            self.gram()
 
     @torch.no_grad()
-    def forward(self, gray: torch.Tensor, learn: bool) -> ScaleOutput:
-        pairs = self.patch_pairs(gray)
+    def encode_images(self, gray: torch.Tensor,
+                      robots: slice = slice(None)) -> tuple[ScaleOutput, SparseCode]:
+        """θ^j and e^j of (B,H,W) gray images against the references of ``robots``, and the
+        sparse code a dictionary step learns from; the dictionary is left alone."""
+        pairs = self.patch_pairs(gray, robots)
         batch, patches, dim = pairs.shape
         code = self.encode(pairs.reshape(batch * patches, dim))
         output = ScaleOutput(
             activity=pooled_activity(code.codes.reshape(batch, patches, -1)),
             error=reconstruction_error(pairs, code.residuals.reshape(batch, patches, dim)),
         )
+        return output, code
+
+    @torch.no_grad()
+    def forward(self, gray: torch.Tensor, learn: bool) -> ScaleOutput:
+        output, code = self.encode_images(gray)
         if learn:
             self.learn_from(code)
         return output

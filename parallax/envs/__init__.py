@@ -4,7 +4,8 @@
 ``control.Environment`` whose observations carry the reference image I0, the left-eye image I(t),
 the pan α and the target pan α* (see ``parallax.envs.task``). The robot, the camera and the
 target-pan solver live in ``hoap3``; textures in ``stimuli``; the fast eye renderer in
-``rendering``.
+``rendering``, whose one GL thread (``gl_thread()``) makes every OpenGL call and can step the
+worlds while the caller computes.
 
 Rendering is headless: a ``MUJOCO_GL`` the user set is respected, otherwise it defaults to egl
 (set here, before dm_control or MuJoCo's GL modules read it).
@@ -15,10 +16,11 @@ from parallax.envs.backend import default_to_egl, import_mujoco
 default_to_egl()
 import_mujoco()  # first, so that a broken GL backend gives one clear error
 
+from parallax.envs.rendering import gl_thread  # noqa: E402
 from parallax.envs.hoap3 import PAN_LIMIT_DEG, Physics, eye_fovy_deg  # noqa: E402
 from parallax.envs.stimuli import StimulusSet, load_stimuli  # noqa: E402
 from parallax.envs.task import (ACTION_SET_DEG, LateralPursuitTask, PursuitEnvironment,  # noqa: E402
                                 distance_grid, load)
 
 __all__ = ["load", "Physics", "LateralPursuitTask", "PursuitEnvironment", "StimulusSet",
-           "load_stimuli", "distance_grid", "eye_fovy_deg", "ACTION_SET_DEG", "PAN_LIMIT_DEG"]
+           "load_stimuli", "distance_grid", "eye_fovy_deg", "gl_thread", "ACTION_SET_DEG", "PAN_LIMIT_DEG"]
