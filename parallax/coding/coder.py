@@ -13,9 +13,11 @@ reference patches are non-persistent and must be set again after a resume.
 from __future__ import annotations
 
 import math
+import os
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import torch
@@ -51,6 +53,18 @@ class Encoding:
 
     output: CoderOutput
     codes: dict[str, SparseCode]
+
+
+_helper: ThreadPoolExecutor | None = None
+_helper_pid: int | None = None
+
+
+def _scale_helper() -> ThreadPoolExecutor:
+    """The thread that encodes the second scale (one per process, started on first use)."""
+    global _helper, _helper_pid
+    if _helper is None or _helper_pid != os.getpid():
+        _helper, _helper_pid = ThreadPoolExecutor(1, thread_name_prefix="parallax-scale"), os.getpid()
+    return _helper
 
 
 def scale_seed(seed: int, scale: str) -> int:
@@ -114,6 +128,8 @@ class MultiScaleCoder(nn.Module):
             coders[name] = ScaleCoder(spec, atoms, sparsity, learning_rate, normalisation,
                                       generator, pursuit)
         self.scales = scales
+        #: Encode and learn the scales on two threads at once (CPU; results are the same).
+        self.parallel_scales = True
         self.atoms = atoms
         self.learn = bool(learn)
         self.normalisation = normalisation
@@ -147,7 +163,7 @@ class MultiScaleCoder(nn.Module):
         all the chunks at once: the outputs and the dictionary step are those of one call.
         """
         gray = as_gray_batch(images, self.device)
-        encoded = {name: self.coders[name].encode_images(gray, robots) for name in self.scales}
+        encoded = self._each_scale(lambda name: self.coders[name].encode_images(gray, robots))
         errors = {name: output.error for name, (output, _) in encoded.items()}
         state = torch.cat([encoded[name][0].activity for name in self.scales], dim=1)
         reward = -torch.stack(list(errors.values())).sum(dim=0)
@@ -159,8 +175,18 @@ class MultiScaleCoder(nn.Module):
         """One dictionary step per scale from an encoding, or from the encodings of consecutive
         chunks of robots in robot order (exactly the step of their joint encoding)."""
         chunks = [encodings] if isinstance(encodings, Encoding) else list(encodings)
-        for name in self.scales:
-            self.coders[name].learn_from([chunk.codes[name] for chunk in chunks])
+        self._each_scale(lambda name: self.coders[name].learn_from([chunk.codes[name] for chunk in chunks]))
+
+    def _each_scale(self, work: Callable[[str], Any]) -> dict[str, Any]:
+        """``work(scale)`` for every scale, the first on this thread and the others on a helper
+        thread at the same time (CPU only): the scales share nothing, and their matrix products
+        and kernels release the GIL, so a second core encodes the fine scale while this one does
+        the coarse."""
+        if len(self.scales) == 1 or self.device.type != "cpu" or not self.parallel_scales:
+            return {name: work(name) for name in self.scales}
+        others = {name: _scale_helper().submit(work, name) for name in self.scales[1:]}
+        first = {self.scales[0]: work(self.scales[0])}
+        return {**first, **{name: future.result() for name, future in others.items()}}
 
     @torch.no_grad()
     def forward(self, images: Any, learn: bool | None = None) -> CoderOutput:
