@@ -19,7 +19,7 @@ import torch
 import torch.nn.functional as F
 
 from . import native
-from .pursuit import SparseCode
+from .pursuit import SparseCode, dense_codes
 
 #: Atoms are divided by max(‖φ‖, this); a gradient step never comes close to zeroing an atom.
 _MIN_ATOM_NORM = 1e-12
@@ -98,6 +98,41 @@ def gradient_step_(dictionary: torch.Tensor, code: SparseCode | Sequence[SparseC
 def pooled_activity(codes: torch.Tensor) -> torch.Tensor:
     """θ (eqs. 2–3): (B, P, N) codes → (B, N) mean squared coefficient of every atom."""
     return codes.square().mean(dim=1)
+
+
+_EXACT_POOLED_ACTIVITY: dict[tuple, bool] = {}
+
+
+def exact_pooled_activity_kernel(patches: int, n_atoms: int, sparsity: int, dtype: torch.dtype,
+                                 kernel: str | None = None) -> bool:
+    """Whether the compiled θ kernel (chosen by ``kernel``, see :mod:`parallax.coding.native`)
+    gives :func:`pooled_activity`'s θ bit for bit for images of ``patches`` patches and
+    ``n_atoms`` atoms. It replays torch's summation order, which depends on the shape (torch
+    sums the last columns that do not fill its widest vectors in another order), so each shape
+    is checked once, on random picks with repeats, against torch itself."""
+    compiled = native.kernels_for(kernel, torch.empty(0, dtype=dtype))
+    if compiled is None:
+        return False
+    key = (patches, n_atoms, sparsity, dtype)
+    if key not in _EXACT_POOLED_ACTIVITY:
+        generator = torch.Generator().manual_seed(patches * 1_000_003 + n_atoms)
+        picks = torch.randint(0, n_atoms, (2 * patches, sparsity), generator=generator)
+        coefficients = torch.randn(2 * patches, sparsity, generator=generator, dtype=dtype)
+        dense = dense_codes(picks, coefficients, n_atoms).reshape(2, patches, n_atoms)
+        _EXACT_POOLED_ACTIVITY[key] = torch.equal(
+            compiled.pooled_activity(picks, coefficients, patches, n_atoms), pooled_activity(dense))
+    return _EXACT_POOLED_ACTIVITY[key]
+
+
+def pooled_activity_of(code: SparseCode, images: int, n_atoms: int) -> torch.Tensor:
+    """θ (B, N) of a code of ``images`` images: from its dense codes, or — when the pursuit did
+    not make them, which the coder only asks for where :func:`exact_pooled_activity_kernel`
+    holds — from its picks in the compiled kernel."""
+    if code.codes is not None:
+        return pooled_activity(code.codes.reshape(images, -1, n_atoms))
+    compiled = native.kernels_for("cpp", code.coefficients)
+    return compiled.pooled_activity(code.atom_indices, code.coefficients,
+                                    code.atom_indices.shape[0] // images, n_atoms)
 
 
 def reconstruction_error(patches: torch.Tensor, residuals: torch.Tensor) -> torch.Tensor:

@@ -1,11 +1,13 @@
 """The compiled CPU kernels of the sparse coder (``pursuit_kernel.cpp``, paper §3.3, eq. 1).
 
-Three functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch by patch),
-``codes_and_residuals`` (dense codes and residuals from the picks) and ``codes_times_residuals``
-(the dictionary gradient's Bᵀ·R). :func:`load_kernels` builds the C++ file on first use with
+Five functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch by patch),
+``codes_and_residuals`` (dense codes and residuals from the picks), ``residuals_only``,
+``pooled_activity`` (θ from the picks, summed in torch's order, without the dense codes; checked
+per shape by :func:`parallax.coding.dictionary.exact_pooled_activity_kernel`) and
+``codes_times_residuals`` (the dictionary gradient's Bᵀ·R). :func:`load_kernels` builds the C++ file on first use with
 ``torch.utils.cpp_extension.load`` (-O3, ~15 s; needs a C++ compiler and the ``ninja``
 package; torch caches the build under ``~/.cache/torch_extensions`` or
-``$TORCH_EXTENSIONS_DIR``, so later processes only load it), then checks once that all three
+``$TORCH_EXTENSIONS_DIR``, so later processes only load it), then checks once that all of them
 reproduce the numpy/torch code bit for bit on random data. It returns the module, or ``None`` —
 with one warning line saying why — when the kernels cannot be built or disagree.
 
@@ -120,6 +122,8 @@ def _self_check(module: ModuleType) -> None:
             for name, mine, theirs in (
                     ("picks", got[0], expected[0]), ("coefficients", got[1], expected[1]),
                     ("codes", codes, code.codes), ("residuals", residuals, code.residuals),
+                    ("residuals alone", module.residuals_only(patches, dictionary, *expected),
+                     code.residuals),
                     ("B^T R", product, codes_times_residuals(code, atoms, kernel="torch"))):
                 if not torch.equal(mine, theirs):
                     raise RuntimeError(f"its {dtype} {name} differ from the numpy/torch code's "

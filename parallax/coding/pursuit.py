@@ -41,7 +41,9 @@ class SparseCode:
 
     atom_indices: torch.Tensor   # (M, sparsity) int64: atom picked at each step
     coefficients: torch.Tensor   # (M, sparsity): correlation added at each step
-    codes: torch.Tensor          # (M, N): b_{i,n}, repeated picks of one atom summed
+    # (M, N): b_{i,n}, repeated picks of one atom summed; None when the pursuit was asked not to
+    # make them (the compiled kernels compute θ from the picks, see dictionary.pooled_activity_of)
+    codes: torch.Tensor | None
     residuals: torch.Tensor      # (M, K): γ − Σ_n b_n·φ_n after the last step
 
 
@@ -83,8 +85,12 @@ def _finish(patches: torch.Tensor, dictionary: torch.Tensor, atom_indices: torch
 
 @torch.no_grad()
 def matching_pursuit(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: int,
-                     gram: torch.Tensor | None = None, kernel: str | None = None) -> SparseCode:
+                     gram: torch.Tensor | None = None, kernel: str | None = None,
+                     dense_codes: bool = True) -> SparseCode:
     """Batched plain MP in Gram form. ``gram`` may be passed when it is cached (Φ unchanged).
+
+    With ``dense_codes=False`` the compiled kernels skip the (M, N) codes (``codes`` is None):
+    the coder's θ comes from the picks instead, and the codes are most of the memory traffic.
 
     ``kernel`` picks the CPU implementation: ``"auto"`` (the compiled kernels when they can be
     built, else numpy/torch), ``"cpp"`` (the kernels, or an error) or ``"torch"``; None reads
@@ -98,6 +104,10 @@ def matching_pursuit(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: 
     compiled = native.kernels_for(kernel, correlations)
     if compiled is not None:
         atom_indices, coefficients = compiled.gram_pursuit(correlations, gram.contiguous(), sparsity)
+        if not dense_codes:
+            residuals = compiled.residuals_only(patches.contiguous(), dictionary.contiguous(),
+                                                atom_indices, coefficients)
+            return SparseCode(atom_indices, coefficients, None, residuals)
         codes, residuals = compiled.codes_and_residuals(patches.contiguous(), dictionary.contiguous(),
                                                         atom_indices, coefficients)
         return SparseCode(atom_indices, coefficients, codes, residuals)

@@ -230,6 +230,123 @@ std::vector<at::Tensor> codes_and_residuals(const at::Tensor& patches, const at:
   return {codes, residuals};
 }
 
+// (M, K) residuals γ_i − Σ_s c_s·φ_{k_s} alone, as codes_and_residuals computes them.
+at::Tensor residuals_only(const at::Tensor& patches, const at::Tensor& dictionary,
+                          const at::Tensor& picks, const at::Tensor& coefficients) {
+  check_cpu_contiguous(patches, "patches");
+  check_cpu_contiguous(dictionary, "dictionary");
+  TORCH_CHECK(patches.dim() == 2 && dictionary.dim() == 2 && patches.size(1) == dictionary.size(1),
+              "patches must be (M, K) and dictionary (N, K)");
+  TORCH_CHECK(patches.scalar_type() == dictionary.scalar_type() &&
+                  coefficients.scalar_type() == patches.scalar_type(),
+              "patches, dictionary and coefficients must share a dtype");
+  const int64_t rows = patches.size(0), dim = patches.size(1), n_atoms = dictionary.size(0);
+  check_picks(picks, coefficients, rows, n_atoms);
+  const int64_t sparsity = picks.size(1);
+  at::Tensor residuals = at::empty({rows, dim}, patches.options());
+  AT_DISPATCH_FLOATING_TYPES(patches.scalar_type(), "residuals_only", [&] {
+    const scalar_t* x = patches.data_ptr<scalar_t>();
+    const scalar_t* phi = dictionary.data_ptr<scalar_t>();
+    const int64_t* p = picks.data_ptr<int64_t>();
+    const scalar_t* w = coefficients.data_ptr<scalar_t>();
+    scalar_t* r = residuals.data_ptr<scalar_t>();
+    at::parallel_for(0, rows, 64, [&](int64_t begin, int64_t end) {
+      std::vector<scalar_t> reconstruction(dim);
+      for (int64_t row = begin; row < end; ++row) {
+        std::fill(reconstruction.begin(), reconstruction.end(), scalar_t(0));
+        for (int64_t step = 0; step < sparsity; ++step) {
+          const scalar_t weight = w[row * sparsity + step];
+          const scalar_t* a = phi + p[row * sparsity + step] * dim;
+          for (int64_t j = 0; j < dim; ++j) {
+            reconstruction[j] = add_weighted(reconstruction[j], weight, a[j]);
+          }
+        }
+        for (int64_t j = 0; j < dim; ++j) {
+          r[row * dim + j] = x[row * dim + j] - reconstruction[j];
+        }
+      }
+    });
+  });
+  return residuals;
+}
+
+// θ (eqs. 2–3), (B, N): for each of B images of P patches, mean_i b_{i,n}² with b the dense
+// codes (repeated picks added up in step order, as codes_and_residuals does), without making
+// the (M, N) codes. The squares are summed over the patches as torch sums a non-innermost
+// dimension (aten/src/ATen/native/cpu/SumKernel.cpp, multi_row_sum: four levels of partial
+// sums, the first flushed into the next every 2^level_power patches), where the zero terms of
+// the dense codes change nothing; then divided by P. native.py checks it against
+// codes.square().mean(dim=1) and does not use it if they differ.
+at::Tensor pooled_activity(const at::Tensor& picks, const at::Tensor& coefficients,
+                           int64_t patches, int64_t n_atoms) {
+  TORCH_CHECK(patches >= 1 && n_atoms >= 1, "patches and n_atoms must be positive");
+  TORCH_CHECK(picks.dim() == 2 && picks.size(0) % patches == 0,
+              "picks must be (B·P, k) for P = ", patches);
+  check_picks(picks, coefficients, picks.size(0), n_atoms);
+  const int64_t images = picks.size(0) / patches, sparsity = picks.size(1);
+  at::Tensor activity = at::empty({images, n_atoms}, coefficients.options());
+  constexpr int64_t kLevels = 4;
+  int64_t ceil_log2 = 1;
+  if (patches > 2) {
+    ceil_log2 = 0;
+    while ((int64_t(1) << ceil_log2) < patches) ++ceil_log2;
+  }
+  const int64_t level_power = std::max<int64_t>(4, ceil_log2 / kLevels);
+  const int64_t level_step = int64_t(1) << level_power;
+  const int64_t level_mask = level_step - 1;
+  AT_DISPATCH_FLOATING_TYPES(coefficients.scalar_type(), "pooled_activity", [&] {
+    const int64_t* p = picks.data_ptr<int64_t>();
+    const scalar_t* w = coefficients.data_ptr<scalar_t>();
+    scalar_t* out = activity.data_ptr<scalar_t>();
+    at::parallel_for(0, images, 1, [&](int64_t begin, int64_t end) {
+      std::vector<scalar_t> levels(kLevels * n_atoms);
+      std::vector<int64_t> atoms(sparsity);
+      std::vector<scalar_t> values(sparsity);
+      for (int64_t image = begin; image < end; ++image) {
+        std::fill(levels.begin(), levels.end(), scalar_t(0));
+        scalar_t* first = levels.data();
+        auto add_patch = [&](int64_t i) {
+          const int64_t row = image * patches + i;
+          int64_t distinct = 0;
+          for (int64_t step = 0; step < sparsity; ++step) {   // b of each atom picked
+            const int64_t atom = p[row * sparsity + step];
+            int64_t slot = 0;
+            while (slot < distinct && atoms[slot] != atom) ++slot;
+            if (slot == distinct) {
+              atoms[distinct] = atom;
+              values[distinct++] = scalar_t(0);
+            }
+            values[slot] += w[row * sparsity + step];
+          }
+          for (int64_t d = 0; d < distinct; ++d) first[atoms[d]] += values[d] * values[d];
+        };
+        int64_t i = 0;
+        while (i + level_step <= patches) {
+          for (int64_t j = 0; j < level_step; ++j, ++i) add_patch(i);
+          for (int64_t level = 1; level < kLevels; ++level) {
+            scalar_t* below = levels.data() + (level - 1) * n_atoms;
+            scalar_t* here = levels.data() + level * n_atoms;
+            for (int64_t n = 0; n < n_atoms; ++n) {
+              here[n] += below[n];
+              below[n] = scalar_t(0);
+            }
+            if ((i & (level_mask << (level * level_power))) != 0) break;
+          }
+        }
+        for (; i < patches; ++i) add_patch(i);
+        for (int64_t level = 1; level < kLevels; ++level) {
+          const scalar_t* here = levels.data() + level * n_atoms;
+          for (int64_t n = 0; n < n_atoms; ++n) first[n] += here[n];
+        }
+        for (int64_t n = 0; n < n_atoms; ++n) {
+          out[image * n_atoms + n] = first[n] / static_cast<scalar_t>(patches);
+        }
+      }
+    });
+  });
+  return activity;
+}
+
 // Bᵀ·R, (N, K): for every atom, Σ c·r_i over the picks of that atom in (patch, step) order, from
 // the (M, k) picks and the (M, K) residuals. With ``out`` the sums are added to it, in place:
 // calls on consecutive chunks of patches then add up exactly as one call on all of them.
@@ -287,6 +404,11 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
         "correlations are updated in place", release_gil());
   m.def("codes_and_residuals", &codes_and_residuals,
         "dense (M, N) codes and (M, K) residuals from the pursuit's picks", release_gil());
+  m.def("residuals_only", &residuals_only,
+        "the (M, K) residuals from the pursuit's picks, without the dense codes", release_gil());
+  m.def("pooled_activity", &pooled_activity,
+        "theta (B, N) from the picks of B images of P patches, summed in torch's order",
+        release_gil());
   m.def("codes_times_residuals", &codes_times_residuals,
         "the dictionary gradient's B^T R, (N, K), from the picks and the residuals; added to "
         "out when given", py::arg("picks"), py::arg("coefficients"), py::arg("residuals"),

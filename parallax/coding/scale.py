@@ -15,7 +15,8 @@ from typing import Sequence
 import torch
 from torch import nn
 
-from .dictionary import gradient_step_, pooled_activity, random_dictionary, reconstruction_error
+from .dictionary import (exact_pooled_activity_kernel, gradient_step_, pooled_activity_of,
+                         random_dictionary, reconstruction_error)
 from .pursuit import SparseCode, gram_matrix, matching_pursuit, matching_pursuit_recompute
 from .retina import ScaleSpec, prepare_reference, scale_patches, stack_pair
 
@@ -86,12 +87,13 @@ class ScaleCoder(nn.Module):
         raw = scale_patches(gray.to(self.dictionary.device), self.spec)
         return stack_pair(reference, raw, self.normalisation)
 
-    def encode(self, patches: torch.Tensor) -> SparseCode:
-        """Matching pursuit (eq. 1) of (M, K) patches on the current dictionary."""
+    def encode(self, patches: torch.Tensor, dense_codes: bool = True) -> SparseCode:
+        """Matching pursuit (eq. 1) of (M, K) patches on the current dictionary (``dense_codes``:
+        see :func:`~parallax.coding.pursuit.matching_pursuit`)."""
         if self.pursuit == "recompute":
             return matching_pursuit_recompute(patches, self.dictionary, self.sparsity)
         return matching_pursuit(patches, self.dictionary, self.sparsity, self.gram(),
-                                kernel=_KERNELS[self.pursuit])
+                                kernel=_KERNELS[self.pursuit], dense_codes=dense_codes)
 
     @torch.no_grad()
     def learn_from(self, code: SparseCode | Sequence[SparseCode]) -> None:
@@ -110,9 +112,14 @@ class ScaleCoder(nn.Module):
         sparse code a dictionary step learns from; the dictionary is left alone."""
         pairs = self.patch_pairs(gray, robots)
         batch, patches, dim = pairs.shape
-        code = self.encode(pairs.reshape(batch * patches, dim))
+        # θ straight from the picks where the compiled kernel gives torch's θ exactly: the dense
+        # (M, N) codes are most of the pursuit's memory traffic.
+        from_picks = (self.pursuit != "recompute" and pairs.device.type == "cpu"
+                      and exact_pooled_activity_kernel(patches, self.atoms, self.sparsity,
+                                                       pairs.dtype, _KERNELS[self.pursuit]))
+        code = self.encode(pairs.reshape(batch * patches, dim), dense_codes=not from_picks)
         output = ScaleOutput(
-            activity=pooled_activity(code.codes.reshape(batch, patches, -1)),
+            activity=pooled_activity_of(code, batch, self.atoms),
             error=reconstruction_error(pairs, code.residuals.reshape(batch, patches, dim)),
         )
         return output, code
