@@ -295,6 +295,18 @@ def test_the_gradient_of_chunks_of_patches_is_that_of_all_of_them_bit_for_bit(co
         assert torch.equal(stepped_chunks, stepped_whole), kernel
 
 
+def test_theta_from_the_picks_is_torchs_theta_bit_for_bit_where_the_coder_uses_it(compiled) -> None:
+    from parallax.coding.dictionary import exact_pooled_activity_kernel, pooled_activity, pooled_activity_of
+
+    patches = _realistic_patches(torch.float32)
+    dictionary = random_dictionary(N, K, torch.Generator().manual_seed(32))
+    assert exact_pooled_activity_kernel(patches.shape[0], N, SPARSITY, torch.float32)   # the paper's coarse scale
+    sparse = matching_pursuit(patches, dictionary, SPARSITY, dense_codes=False)
+    dense = matching_pursuit(patches, dictionary, SPARSITY)
+    assert sparse.codes is None and torch.equal(sparse.residuals, dense.residuals)
+    assert torch.equal(pooled_activity_of(sparse, 1, N), pooled_activity(dense.codes.reshape(1, -1, N)))
+
+
 def test_half_precision_takes_the_torch_code_even_when_the_kernels_are_asked_for(compiled) -> None:
     from parallax.coding.dictionary import gradient_step_
 
