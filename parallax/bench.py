@@ -10,7 +10,8 @@ Prints a readable table and writes JSON of
   traffic divided by the measured matmul throughput and memory bandwidth.
 
 Everything is measured in the same run, so ratios are comparable even on a shared machine;
-medians, never means.
+medians, never means. ``--threads`` sets torch's intra-op threads; the step also runs the world
+on the GL thread and the coder's second scale on a helper thread whatever it is (README, Speed).
 """
 
 from __future__ import annotations
@@ -99,9 +100,10 @@ def coder_work_per_frame(cfg) -> dict[str, float]:
 
     Counted as the coder computes them: correlations X·Φᵀ (2PKN), the Gram matrix ΦΦᵀ (2N²K),
     k steps of C ← C − c·G[j] (2kPN), the reconstruction from the k picks (2PkK), the sparse
-    dictionary gradient Bᵀ·R from the picks (2PkK) and the pooled activities (2PN). Bytes: the
-    patches and the dictionary read about three times, the Gram matrix once, the correlation
-    matrix read and written at each of the k steps, the dense codes written and read once.
+    dictionary gradient Bᵀ·R from the picks (2PkK) and the pooled activities from the picks
+    (2Pk). Bytes: the patches and the dictionary read about three times, the Gram matrix once,
+    the correlation matrix read and written at each of the k steps (the dense (P, N) codes are
+    not made since session 8).
     """
     from parallax.coding.retina import ScaleSpec
 
@@ -111,8 +113,8 @@ def coder_work_per_frame(cfg) -> dict[str, float]:
         spec = cfg.coder.scale_specs[scale]
         geometry = ScaleSpec.from_mapping(scale, spec)
         P, K = geometry.patch_count, geometry.dim
-        flops += 2 * P * K * N + 2 * N * N * K + 2 * k * P * N + 4 * P * k * K + 2 * P * N
-        bytes_moved += 4 * (3 * P * K + 3 * N * K + N * N + 2 * (k + 1) * P * N + 2 * P * N)
+        flops += 2 * P * K * N + 2 * N * N * K + 2 * k * P * N + 4 * P * k * K + 2 * P * k
+        bytes_moved += 4 * (3 * P * K + 3 * N * K + N * N + 2 * (k + 1) * P * N)
     return {"flops": flops, "bytes": bytes_moved}
 
 

@@ -152,7 +152,9 @@ class Experiment:
         works: the dictionary step of iteration t runs while the frames of t + 1 render, and the
         robots' frames are encoded chunk by chunk as they arrive. Every value is computed as in
         the plain sequence render → encode → policy → dictionary step, in the same order per
-        robot and per dictionary, so the results do not depend on it (tests/test_experiment).
+        robot and per dictionary, so the results do not depend on it (tests/test_experiment;
+        with one torch thread, ``train.threads=1``, the default: with more, the matrix library
+        may split a product of a chunk's rows otherwise than one of all rows).
         """
         learn_dictionaries = learn and self.coder.learn
         world = parallax.envs.gl_thread()

@@ -16,7 +16,7 @@ def test_coder_work_counts_the_paper_patches():
     assert both["flops"] == coarse["flops"] + fine["flops"]
     N, K, k = 288, 200, 10
     # 529 coarse patches (23×23 after ×8), 289 fine ones (17×17 after ×2)
-    assert coarse["flops"] == 2 * 529 * K * N + 2 * N * N * K + 2 * k * 529 * N + 4 * 529 * k * K + 2 * 529 * N
+    assert coarse["flops"] == 2 * 529 * K * N + 2 * N * N * K + 2 * k * 529 * N + 4 * 529 * k * K + 2 * 529 * k
     assert fine["flops"] < coarse["flops"]
 
 

@@ -184,7 +184,16 @@ class MultiScaleCoder(nn.Module):
         the coarse."""
         if len(self.scales) == 1 or self.device.type != "cpu" or not self.parallel_scales:
             return {name: work(name) for name in self.scales}
-        others = {name: _scale_helper().submit(work, name) for name in self.scales[1:]}
+        threads = torch.get_num_threads()
+
+        def on_helper(name: str) -> Any:
+            # torch's thread count is per thread under OpenMP: the helper takes the caller's, so
+            # that its reductions and products add up as the caller's would.
+            if torch.get_num_threads() != threads:
+                torch.set_num_threads(threads)
+            return work(name)
+
+        others = {name: _scale_helper().submit(on_helper, name) for name in self.scales[1:]}
         first = {self.scales[0]: work(self.scales[0])}
         return {**first, **{name: future.result() for name, future in others.items()}}
 

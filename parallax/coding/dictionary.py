@@ -108,12 +108,13 @@ def exact_pooled_activity_kernel(patches: int, n_atoms: int, sparsity: int, dtyp
     """Whether the compiled θ kernel (chosen by ``kernel``, see :mod:`parallax.coding.native`)
     gives :func:`pooled_activity`'s θ bit for bit for images of ``patches`` patches and
     ``n_atoms`` atoms. It replays torch's summation order, which depends on the shape (torch
-    sums the last columns that do not fill its widest vectors in another order), so each shape
-    is checked once, on random picks with repeats, against torch itself."""
+    sums the last columns that do not fill its widest vectors in another order) and on its
+    thread count, so each case is checked once, on random picks with repeats, against torch."""
     compiled = native.kernels_for(kernel, torch.empty(0, dtype=dtype))
     if compiled is None:
         return False
-    key = (patches, n_atoms, sparsity, dtype)
+    # torch's θ depends on its thread count too (a reduction may be split between threads)
+    key = (patches, n_atoms, sparsity, dtype, torch.get_num_threads())
     if key not in _EXACT_POOLED_ACTIVITY:
         generator = torch.Generator().manual_seed(patches * 1_000_003 + n_atoms)
         picks = torch.randint(0, n_atoms, (2 * patches, sparsity), generator=generator)

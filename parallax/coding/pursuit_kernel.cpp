@@ -184,11 +184,12 @@ std::vector<at::Tensor> gram_pursuit(at::Tensor correlations, const at::Tensor& 
   return {picks, coefficients};
 }
 
-// (M, K) patches, the (N, K) dictionary and the (M, k) picks → the (M, N) codes b_{i,n}
-// (repeated picks add up, in step order) and the (M, K) residuals γ_i − Σ_s c_s·φ_{k_s}.
-std::vector<at::Tensor> codes_and_residuals(const at::Tensor& patches, const at::Tensor& dictionary,
-                                            const at::Tensor& picks,
-                                            const at::Tensor& coefficients) {
+// (M, K) patches, the (N, K) dictionary and the (M, k) picks → the (M, K) residuals
+// γ_i − Σ_s c_s·φ_{k_s} and, with ``with_codes``, the (M, N) codes b_{i,n} (repeated picks add up,
+// in step order; else an undefined tensor).
+std::vector<at::Tensor> reconstruct(const at::Tensor& patches, const at::Tensor& dictionary,
+                                    const at::Tensor& picks, const at::Tensor& coefficients,
+                                    bool with_codes) {
   check_cpu_contiguous(patches, "patches");
   check_cpu_contiguous(dictionary, "dictionary");
   TORCH_CHECK(patches.dim() == 2 && dictionary.dim() == 2 && patches.size(1) == dictionary.size(1),
@@ -199,14 +200,14 @@ std::vector<at::Tensor> codes_and_residuals(const at::Tensor& patches, const at:
   const int64_t rows = patches.size(0), dim = patches.size(1), n_atoms = dictionary.size(0);
   check_picks(picks, coefficients, rows, n_atoms);
   const int64_t sparsity = picks.size(1);
-  at::Tensor codes = at::zeros({rows, n_atoms}, patches.options());
+  at::Tensor codes = with_codes ? at::zeros({rows, n_atoms}, patches.options()) : at::Tensor();
   at::Tensor residuals = at::empty({rows, dim}, patches.options());
-  AT_DISPATCH_FLOATING_TYPES(patches.scalar_type(), "codes_and_residuals", [&] {
+  AT_DISPATCH_FLOATING_TYPES(patches.scalar_type(), "reconstruct", [&] {
     const scalar_t* x = patches.data_ptr<scalar_t>();
     const scalar_t* phi = dictionary.data_ptr<scalar_t>();
     const int64_t* p = picks.data_ptr<int64_t>();
     const scalar_t* w = coefficients.data_ptr<scalar_t>();
-    scalar_t* b = codes.data_ptr<scalar_t>();
+    scalar_t* b = with_codes ? codes.data_ptr<scalar_t>() : nullptr;
     scalar_t* r = residuals.data_ptr<scalar_t>();
     at::parallel_for(0, rows, 64, [&](int64_t begin, int64_t end) {
       std::vector<scalar_t> reconstruction(dim);
@@ -215,7 +216,7 @@ std::vector<at::Tensor> codes_and_residuals(const at::Tensor& patches, const at:
         for (int64_t step = 0; step < sparsity; ++step) {
           const int64_t atom = p[row * sparsity + step];
           const scalar_t weight = w[row * sparsity + step];
-          b[row * n_atoms + atom] += weight;
+          if (b != nullptr) b[row * n_atoms + atom] += weight;
           const scalar_t* a = phi + atom * dim;
           for (int64_t j = 0; j < dim; ++j) {
             reconstruction[j] = add_weighted(reconstruction[j], weight, a[j]);
@@ -230,44 +231,17 @@ std::vector<at::Tensor> codes_and_residuals(const at::Tensor& patches, const at:
   return {codes, residuals};
 }
 
-// (M, K) residuals γ_i − Σ_s c_s·φ_{k_s} alone, as codes_and_residuals computes them.
+// The (M, N) codes and the (M, K) residuals (see reconstruct).
+std::vector<at::Tensor> codes_and_residuals(const at::Tensor& patches, const at::Tensor& dictionary,
+                                            const at::Tensor& picks,
+                                            const at::Tensor& coefficients) {
+  return reconstruct(patches, dictionary, picks, coefficients, true);
+}
+
+// The (M, K) residuals alone, as codes_and_residuals computes them.
 at::Tensor residuals_only(const at::Tensor& patches, const at::Tensor& dictionary,
                           const at::Tensor& picks, const at::Tensor& coefficients) {
-  check_cpu_contiguous(patches, "patches");
-  check_cpu_contiguous(dictionary, "dictionary");
-  TORCH_CHECK(patches.dim() == 2 && dictionary.dim() == 2 && patches.size(1) == dictionary.size(1),
-              "patches must be (M, K) and dictionary (N, K)");
-  TORCH_CHECK(patches.scalar_type() == dictionary.scalar_type() &&
-                  coefficients.scalar_type() == patches.scalar_type(),
-              "patches, dictionary and coefficients must share a dtype");
-  const int64_t rows = patches.size(0), dim = patches.size(1), n_atoms = dictionary.size(0);
-  check_picks(picks, coefficients, rows, n_atoms);
-  const int64_t sparsity = picks.size(1);
-  at::Tensor residuals = at::empty({rows, dim}, patches.options());
-  AT_DISPATCH_FLOATING_TYPES(patches.scalar_type(), "residuals_only", [&] {
-    const scalar_t* x = patches.data_ptr<scalar_t>();
-    const scalar_t* phi = dictionary.data_ptr<scalar_t>();
-    const int64_t* p = picks.data_ptr<int64_t>();
-    const scalar_t* w = coefficients.data_ptr<scalar_t>();
-    scalar_t* r = residuals.data_ptr<scalar_t>();
-    at::parallel_for(0, rows, 64, [&](int64_t begin, int64_t end) {
-      std::vector<scalar_t> reconstruction(dim);
-      for (int64_t row = begin; row < end; ++row) {
-        std::fill(reconstruction.begin(), reconstruction.end(), scalar_t(0));
-        for (int64_t step = 0; step < sparsity; ++step) {
-          const scalar_t weight = w[row * sparsity + step];
-          const scalar_t* a = phi + p[row * sparsity + step] * dim;
-          for (int64_t j = 0; j < dim; ++j) {
-            reconstruction[j] = add_weighted(reconstruction[j], weight, a[j]);
-          }
-        }
-        for (int64_t j = 0; j < dim; ++j) {
-          r[row * dim + j] = x[row * dim + j] - reconstruction[j];
-        }
-      }
-    });
-  });
-  return residuals;
+  return reconstruct(patches, dictionary, picks, coefficients, false)[1];
 }
 
 // θ (eqs. 2–3), (B, N): for each of B images of P patches, mean_i b_{i,n}² with b the dense
