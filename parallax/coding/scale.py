@@ -124,13 +124,6 @@ class ScaleCoder(nn.Module):
         )
         return output, code
 
-    @torch.no_grad()
-    def forward(self, gray: torch.Tensor, learn: bool) -> ScaleOutput:
-        output, code = self.encode_images(gray)
-        if learn:
-            self.learn_from(code)
-        return output
-
     def extra_repr(self) -> str:
         return (f"spec={self.spec}, atoms={self.atoms}, sparsity={self.sparsity}, "
                 f"learning_rate={self.learning_rate}, normalisation={self.normalisation!r}, "
