@@ -103,7 +103,7 @@ def coder_work_per_frame(cfg) -> dict[str, float]:
     dictionary gradient Bᵀ·R from the picks (2PkK) and the pooled activities from the picks
     (2Pk). Bytes: the patches and the dictionary read about three times, the Gram matrix once,
     the correlation matrix read and written at each of the k steps (the dense (P, N) codes are
-    not made since session 8).
+    not made: θ comes from the picks).
     """
     from parallax.coding.retina import ScaleSpec
 

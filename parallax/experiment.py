@@ -159,8 +159,7 @@ class Experiment:
         learn_dictionaries = learn and self.coder.learn
         world = parallax.envs.gl_thread()
         futures = [world.submit(env.reset) for env in self.envs]
-        for future in futures:   # every robot's I0 before any encoding
-            future.result()
+        # every robot's I0 before any encoding
         self.coder.set_reference(self._images([f.result().observation for f in futures], "reference"))
         timesteps, encodings = self._gather(futures)
         obs = [ts.observation for ts in timesteps]
@@ -243,7 +242,7 @@ class Experiment:
             arrived = [future.result() for future in futures[robots]]
             timesteps += arrived
             images = self._images([ts.observation for ts in arrived], "image")
-            encodings.append(self.coder.encode(images, robots if self.robots > chunk else slice(None)))
+            encodings.append(self.coder.encode(images, robots))
         return timesteps, encodings
 
     # --- state -----------------------------------------------------------------------------

@@ -186,7 +186,7 @@ def _realistic_patches(dtype: torch.dtype) -> torch.Tensor:
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-@pytest.mark.parametrize("atoms", [N, 75, 37, 5])   # whole vectors, and 4-vector blocks with a vector and a tail after them, a tail, only a tail
+@pytest.mark.parametrize("atoms", [N, 75, 37, 5])   # whole vector lanes, long and short tails, only a tail
 def test_fused_kernel_is_bit_identical_to_the_torch_loop_on_random_data(compiled, dtype, atoms) -> None:
     dictionary = _unit_rows(atoms, K, seed=20, dtype=dtype)
     correlations = _unit_rows(200, K, seed=21, dtype=dtype) @ dictionary.T

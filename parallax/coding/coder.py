@@ -175,9 +175,10 @@ class MultiScaleCoder(nn.Module):
         """One dictionary step per scale from an encoding, or from the encodings of consecutive
         chunks of robots in robot order (exactly the step of their joint encoding)."""
         chunks = [encodings] if isinstance(encodings, Encoding) else list(encodings)
-        # One scale after the other: in a lockstep this runs while the world renders, and a second
-        # thread here took the core the renderer needed (B = 1: 157–166 against 166–176
-        # robot-iterations/s in alternating runs; B = 16 the same).
+        # One scale after the other: in a lockstep this runs while the world renders, and with a
+        # second thread here the whole step was slower, probably because it took the core the
+        # renderer needed (B = 1: 157–166 against 166–176 robot-iterations/s in alternating runs;
+        # B = 16 the same).
         for name in self.scales:
             self.coders[name].learn_from([chunk.codes[name] for chunk in chunks])
 

@@ -4,8 +4,8 @@ Five functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch 
 ``codes_and_residuals`` (dense codes and residuals from the picks), ``residuals_only``,
 ``pooled_activity`` (θ from the picks, summed in torch's order, without the dense codes; checked
 per shape by :func:`parallax.coding.dictionary.exact_pooled_activity_kernel`) and
-``codes_times_residuals`` (the dictionary gradient's Bᵀ·R). :func:`load_kernels` builds the C++ file on first use with
-``torch.utils.cpp_extension.load`` (-O3, ~15 s; needs a C++ compiler and the ``ninja``
+``codes_times_residuals`` (the dictionary gradient's Bᵀ·R). :func:`load_kernels` builds the C++
+file on first use with ``torch.utils.cpp_extension.load`` (-O3, ~15 s; needs a C++ compiler and the ``ninja``
 package; torch caches the build under ``~/.cache/torch_extensions`` or
 ``$TORCH_EXTENSIONS_DIR``, so later processes only load it), then checks once that all of them
 reproduce the numpy/torch code bit for bit on random data. It returns the module, or ``None`` —
@@ -107,7 +107,7 @@ def _self_check(module: ModuleType) -> None:
 
     generator = torch.Generator().manual_seed(0)
     for dtype in (torch.float32, torch.float64):
-        for atoms in (40, 37, 75):   # whole vectors, a tail after them, and both after 4-vector blocks
+        for atoms in (40, 37, 75):   # whole vector lanes only, and a tail after them (short, long)
             dictionary = torch.randn(atoms, 12, generator=generator, dtype=dtype)
             dictionary /= dictionary.norm(dim=1, keepdim=True)
             patches = torch.randn(64, 12, generator=generator, dtype=dtype)

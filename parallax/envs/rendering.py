@@ -50,7 +50,7 @@ class GLThread:
     """The one thread that makes the process's OpenGL calls; jobs run one at a time, in order."""
 
     def __init__(self) -> None:
-        self._jobs: "queue.SimpleQueue[tuple[Future, Callable[..., Any], tuple] | None]" = queue.SimpleQueue()
+        self._jobs: "queue.SimpleQueue[tuple[Future, Callable[..., Any], tuple]]" = queue.SimpleQueue()
         # A daemon: it must not keep a finished program alive, and it still serves the exit hook
         # below (daemon threads run until the interpreter tears down, after the atexit hooks).
         self._thread = threading.Thread(target=self._serve, name="parallax-gl", daemon=True)
@@ -58,10 +58,7 @@ class GLThread:
 
     def _serve(self) -> None:
         while True:
-            job = self._jobs.get()
-            if job is None:
-                return
-            future, function, arguments = job
+            future, function, arguments = self._jobs.get()
             if future.set_running_or_notify_cancel():
                 _run_into(future, function, arguments)
 
