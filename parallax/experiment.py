@@ -134,15 +134,26 @@ class Experiment:
         return self.coder(reference, learn=False).state
 
     def policy_state(self, theta: torch.Tensor, reference_state: torch.Tensor | None,
-                     pans_deg: np.ndarray, lateral_m: float) -> torch.Tensor:
+                     pans_deg: np.ndarray, lateral_m: float,
+                     reward_change: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> torch.Tensor:
         """What the policy acts on: θ (B, state_dim), minus θ_ref with ``feature_norm=difference``,
-        then the eye-position entry when ``policy.eye_position_reference_m`` > 0 (both beyond the
-        paper), for the robots' pans (B,) at their shared lateral position."""
+        then the eye-position entry when ``policy.eye_position_reference_m`` > 0, then the
+        reward-change entry when ``policy.reward_change_gain`` > 0 (all three beyond the paper),
+        for the robots' pans (B,) at their shared lateral position. ``reward_change`` is
+        (rewards, previous rewards, previous pan increments), each (B,); None: no previous step
+        (the entry is 0)."""
         state = theta if reference_state is None else theta - reference_state
+        extra = []
         if self.policy.eye_position_dims:
             pans = torch.as_tensor(np.asarray(pans_deg, dtype=np.float64))
-            state = torch.cat([state, self.policy.eye_position_feature(pans, lateral_m)], dim=1)
-        return state
+            extra.append(self.policy.eye_position_feature(pans, lateral_m))
+        if self.policy.reward_change_dims:
+            if reward_change is None:
+                extra.append(torch.zeros(state.shape[0], 1, dtype=self.policy.actor.dtype,
+                                         device=self.policy.actor.device))
+            else:
+                extra.append(self.policy.reward_change_feature(*reward_change))
+        return torch.cat([state, *[e.to(state.dtype) for e in extra]], dim=1) if extra else state
 
     def run_presentation(self, learn: bool = True, greedy: bool = False,
                          keep_view: bool = False) -> Presentation:
@@ -168,7 +179,7 @@ class Experiment:
         pans, targets, start_pans = np.zeros((B, r)), np.zeros((B, r)), np.zeros((B, r))
         best_pans, best_rewards = np.zeros((B, r)), np.full((B, r), -np.inf)
 
-        prev_state = prev_action = None
+        prev_state = prev_action = prev_rewards = None
         reference_state = None
         valid = torch.ones(B, dtype=torch.bool, device=self.device)  # every robot learns every step
         reward_sum, error_sums, n_enc = 0.0, {}, 0
@@ -193,7 +204,9 @@ class Experiment:
             better = rewards > best_rewards[:, p]      # ties keep the earlier pan
             best_rewards[better, p] = rewards[better]
             best_pans[better, p] = current_pans[better]
-            state = self.policy_state(out.state, reference_state, current_pans, lateral[p])
+            # the last step's reward change, within the trial only (none at its first iteration)
+            change = None if iteration == 0 or prev_rewards is None else (rewards, prev_rewards, increments)
+            state = self.policy_state(out.state, reference_state, current_pans, lateral[p], change)
             # Robots move in lockstep, so they cross a trial boundary together; the transition into
             # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
             if learn and prev_state is not None and iteration > 0:
@@ -215,7 +228,7 @@ class Experiment:
                 self.coder.learn_from(encodings)   # while the next frames render
             timesteps, encodings = self._gather(futures)
             obs = [ts.observation for ts in timesteps]
-            prev_state, prev_action = state, action
+            prev_state, prev_action, prev_rewards = state, action, rewards
             steps += 1
 
         view = None

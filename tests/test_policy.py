@@ -342,3 +342,34 @@ def test_eye_position_feature_is_the_implied_nearness_and_bypasses_the_normalise
     policy.update(states, torch.tensor([6, 6, 6]), torch.tensor([1.0, 1.0, 1.0]), states,
                   torch.tensor([True, True, True]))
     assert not torch.equal(policy.actor[:, -1], before)
+
+
+def test_reward_change_feature_is_the_signed_relative_change_and_bypasses_the_normaliser() -> None:
+    # Beyond the paper: g = clip(gain·(r_t − r_{t−1})/|r_{t−1}|·sign(a_{t−1}), −1, 1), after ν.
+    policy = _policy(feature_norm="difference", eye_position_reference_m=0.5, reward_change_gain=10.0)
+    assert policy.input_dim == SMALL_DIM + 2 and policy.actor.shape == (7, SMALL_DIM + 2)
+    rewards = torch.tensor([-0.97, -0.97, -0.97, -1.03, -0.5, -0.8])
+    previous = torch.tensor([-1.0, -1.0, -1.0, -1.0, -1.0, -0.8])
+    increments = torch.tensor([0.1, -0.05, 0.0, 0.2, 0.05, -0.2])
+    g = policy.reward_change_feature(rewards, previous, increments).squeeze(1).double()
+    # +3 % after a left step → +0.3; after a right step → −0.3; no step → 0; −3 % after a left
+    # step → −0.3; +50 % → clipped to 1; no change → 0
+    torch.testing.assert_close(g, torch.tensor([0.3, -0.3, 0.0, -0.3, 1.0, 0.0], dtype=torch.float64),
+                               rtol=1e-5, atol=1e-6)
+    assert _policy(reward_change_gain=0.0).input_dim == SMALL_DIM
+    with pytest.raises(ValueError, match="reward_change_gain"):
+        _policy(reward_change_gain=-1.0)
+    theta = _states(3, seed=62) - _states(3, seed=63)
+    extra = torch.tensor([[0.1, 0.3], [0.2, -1.0], [0.0, 0.0]])
+    states = torch.cat([theta, extra], dim=1)
+    policy.act(states)
+    assert float(policy.normalizer.norm_mean) == pytest.approx(float(theta.double().norm(dim=1).mean()), rel=1e-6)
+    features = policy.features(states)
+    torch.testing.assert_close(features[:, -2:], extra)
+    # its weight learns: a rewarded step from states with g ≠ 0 moves the last column
+    before = policy.actor[:, -1].clone()
+    policy.update(states, torch.tensor([6, 6, 6]), torch.tensor([1.0, 1.0, 1.0]), states,
+                  torch.ones(3, dtype=torch.bool))
+    policy.update(states, torch.tensor([6, 6, 6]), torch.tensor([1.0, 1.0, 1.0]), states,
+                  torch.ones(3, dtype=torch.bool))
+    assert not torch.equal(policy.actor[:, -1], before)

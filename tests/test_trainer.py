@@ -326,3 +326,46 @@ def test_eye_position_feature_reaches_the_policy(tmp_path, tiny_overrides, monke
 
     actor = checkpoint.load(tmp_path / "run" / "checkpoint.pt")["experiment"]["policy"]["actor"]
     assert actor.shape[1] == 32 * 2 + 1 and bool(actor[:, -1].abs().sum() > 0)  # ν's weight was learnt
+
+
+def test_reward_change_feature_reaches_the_policy(tmp_path, tiny_overrides, monkeypatch):
+    # policy.reward_change_gain > 0 (beyond the paper): the last state entry is the reward's
+    # relative change over the robot's last pan step, signed by the step; 0 at a trial's start.
+    from parallax.policy import NaturalActorCritic
+
+    cfg = compose(tiny_overrides + ["policy.reward_change_gain=10"])
+    trainer = Trainer(cfg, tmp_path)
+    physics = trainer.exp.envs[0].physics
+    seen, pans = [], []
+    act = NaturalActorCritic.act
+    update = NaturalActorCritic.update
+    rewards = []
+
+    def recording_act(self, phi, greedy=False):
+        seen.append(float(phi[0, -1]))
+        pans.append(physics.pan_deg())
+        return act(self, phi, greedy)
+
+    def recording_update(self, phi, action, reward, next_phi, valid):
+        rewards.append(float(reward[0]))
+        return update(self, phi, action, reward, next_phi, valid)
+
+    monkeypatch.setattr(NaturalActorCritic, "act", recording_act)
+    monkeypatch.setattr(NaturalActorCritic, "update", recording_update)
+    try:
+        pres = trainer.exp.run_presentation()
+    finally:
+        trainer.exp.close()
+    t_h = int(cfg.env.trial_length)
+    assert len(seen) == pres.steps - 1 and any(abs(g) > 1e-3 for g in seen)
+    # the first iteration of every trial has no previous step
+    assert all(g == 0.0 for g in seen[::t_h])
+    # within a trial: g = clip(10·Δr/|r_prev|·sign(Δpan)); rewards[k] is the reward of the image
+    # acted on at seen[k + 1 + (k // (t_h - 1))] (the update into a trial's first image is skipped)
+    trial_rewards = [rewards[i * (t_h - 1):(i + 1) * (t_h - 1)] for i in range(len(seen) // t_h)]
+    for i, rs in enumerate(trial_rewards):
+        for k in range(1, len(rs)):
+            step = pans[i * t_h + k + 1] - pans[i * t_h + k]
+            sign = (step > 1e-9) - (step < -1e-9)
+            expected = max(-1.0, min(1.0, 10 * (rs[k] - rs[k - 1]) / abs(rs[k - 1]) * sign))
+            assert seen[i * t_h + k + 1] == pytest.approx(expected, rel=1e-4, abs=1e-6)

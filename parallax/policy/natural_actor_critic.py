@@ -92,6 +92,7 @@ class NaturalActorCritic(nn.Module):
         seed: int = 0,
         zscore_horizon: int = 0,
         eye_position_reference_m: float = 0.0,
+        reward_change_gain: float = 0.0,
     ) -> None:
         super().__init__()
         state_dim = _check_int("state_dim", state_dim, minimum=1)
@@ -107,7 +108,11 @@ class NaturalActorCritic(nn.Module):
                                                             eye_position_reference_m)
         # Beyond the paper: one proprioceptive entry after the normalised θ (see eye_position_feature).
         self.eye_position_dims = 1 if self.eye_position_reference_m > 0 else 0
-        self.input_dim = state_dim + self.eye_position_dims
+        # Beyond the paper: one more entry, the last step's change of reward in its direction
+        # (see reward_change_feature).
+        self.reward_change_gain = _check_non_negative("reward_change_gain", reward_change_gain)
+        self.reward_change_dims = 1 if self.reward_change_gain > 0 else 0
+        self.input_dim = state_dim + self.eye_position_dims + self.reward_change_dims
         self.critic_lr = _check_non_negative("critic_lr", critic_lr)
         self.advantage_lr = _check_non_negative("advantage_lr", advantage_lr)
         self.actor_lr = _check_non_negative("actor_lr", actor_lr)
@@ -175,8 +180,9 @@ class NaturalActorCritic(nn.Module):
         return self._normalise(self._check_states("phi", states))
 
     def _normalise(self, states: torch.Tensor) -> torch.Tensor:
-        """θ through the feature normaliser; the eye-position entry, if any, passes unchanged."""
-        if not self.eye_position_dims:
+        """θ through the feature normaliser; the entries after θ (eye position, reward change),
+        if any, pass unchanged."""
+        if self.input_dim == self.state_dim:
             return self.normalizer(states)
         return torch.cat([self.normalizer(states[:, :self.state_dim]),
                           states[:, self.state_dim:]], dim=1)
@@ -196,6 +202,28 @@ class NaturalActorCritic(nn.Module):
             return torch.zeros_like(pan)
         nearness = torch.tan(torch.deg2rad(pan)) * (self.eye_position_reference_m / float(lateral_m))
         return nearness.clamp(-1.0, 1.0)
+
+    def reward_change_feature(self, rewards: torch.Tensor, previous_rewards: torch.Tensor,
+                              previous_increments: torch.Tensor) -> torch.Tensor:
+        """The reward-change entry (B, 1): how much the last pan step changed the reward, signed
+        by the step's direction.
+
+        Beyond the paper. g = clip(gain · (r_t − r_{t−1}) / |r_{t−1}| · sign(a_{t−1}), −1, 1): > 0
+        when turning left (a > 0) helped or turning right hurt, < 0 the other way, 0 after a
+        zero step. The reward −(e_C + e_F) peaks at α* on both sides (``parallax.landscape``),
+        so g says on which side of the peak the eye is, which the pooled activities do not once
+        the image pair no longer overlaps: past the target the eye kept turning (runaways,
+        docs/results/beyond_the_paper.md). One weight per action can then say "go back where the
+        reward fell". It is a memory of one step (an efference copy of the last movement and
+        the change it made), not knowledge of the distance. Relative to |r_{t−1}| so one gain
+        serves untrained and trained coders alike, whose rewards differ tenfold. The caller
+        passes previous_increments = 0 where there is no previous step in the trial."""
+        rewards = torch.as_tensor(rewards, dtype=torch.float64).reshape(-1)
+        previous = torch.as_tensor(previous_rewards, dtype=torch.float64).reshape(-1)
+        direction = torch.sign(torch.as_tensor(previous_increments, dtype=torch.float64).reshape(-1))
+        relative = (rewards - previous) / previous.abs().clamp_min(1e-12)
+        change = (self.reward_change_gain * relative * direction).clamp(-1.0, 1.0)
+        return change.to(device=self.actor.device, dtype=self.actor.dtype).reshape(-1, 1)
 
     def _logits(self, features: torch.Tensor) -> torch.Tensor:
         return features @ self.actor.T / self.temperature
@@ -321,4 +349,5 @@ class NaturalActorCritic(nn.Module):
                 f"ξ={self.discount}, ζ={self.reward_rate}, λ={self.weight_decay}, "
                 f"T={self.temperature}, feature_norm={self.feature_norm!r}, "
                 f"zscore_horizon={self.normalizer.horizon}, "
-                f"eye_position_reference_m={self.eye_position_reference_m}")
+                f"eye_position_reference_m={self.eye_position_reference_m}, "
+                f"reward_change_gain={self.reward_change_gain}")
