@@ -17,7 +17,8 @@
 # Since session 5 every run also uses settings beyond the paper, chosen on probes
 # (docs/results/beyond_the_paper.md): the policy's state relative to the zero-disparity view,
 # trials starting from a random pan in ±2°, weight decay 0.1 in the LM fit, and (session 6) the
-# eye's own pan as one more policy feature. Since session 7 the random start ends after a
+# eye's own pan as one more policy feature; (session 9) the last step's signed change of reward
+# as one more policy feature. Since session 7 the random start ends after a
 # warm-up (train.start_jitter_presentations: 100 single, 50 for 5–10 cm, 33 for 5–20 cm), so the
 # last 100 trials before the perturbation, which Table 2 averages, start from pan 0 as the
 # paper's did; the 5–10 cm runs got 300 presentations so that their 150 before the perturbation
@@ -25,8 +26,9 @@
 # Extra arguments are Hydra overrides for every training job (they come last, so e.g.
 # train.presentations=2000 lengthens every run). Environment: launch/ablation_lib.sh, plus
 #   EVAL_ARGS      parallax-eval options (default: the grid 3.0, 3.5, …, 10.0 m, one held-out texture each)
-#   IMPROVEMENTS   the beyond-the-paper overrides above; IMPROVEMENTS= (empty) runs the paper's
-#                  algorithm with the shipped settings, as the reports of sessions 2–4 did
+#   IMPROVEMENTS   the beyond-the-paper overrides above; IMPROVEMENTS=policy.reward_change_gain=0
+#                  runs the paper's algorithm with the shipped settings, as the reports of
+#                  sessions 2–4 did (the reward-change feature is on by default since session 9)
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
@@ -34,7 +36,7 @@ sweep="$(px_sweep_dir reproduce)"
 unweighted="$(px_sweep_dir reproduce_unweighted)"
 five_ten_c50="$(px_sweep_dir reproduce_5_10_c50)"
 seeds="seed=${SEEDS:-0,1,2}"
-read -ra improvements <<< "${IMPROVEMENTS-policy.feature_norm=difference env.initial_pan_jitter_deg=2 distance.lm.weight_decay=0.1 policy.eye_position_reference_m=0.5}"
+read -ra improvements <<< "${IMPROVEMENTS-policy.feature_norm=difference env.initial_pan_jitter_deg=2 distance.lm.weight_decay=0.1 policy.eye_position_reference_m=0.5 policy.reward_change_gain=10}"
 singles=paper_single_5,paper_single_7,paper_single_10,paper_single_13,paper_single_15,paper_single_20
 status=0
 px_sweep "$sweep" "experiment=$singles" "$seeds" train.presentations=400 train.start_jitter_presentations=100 \

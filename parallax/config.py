@@ -110,6 +110,7 @@ def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
 SETTINGS_ADDED_LATER: dict[str, Any] = {"distance.outlier_mads": None, "distance.lm.weight_decay": 0.0,
                                          "env.initial_pan_jitter_deg_per_m": 0.0,
                                          "policy.eye_position_reference_m": 0.0,
+                                         "policy.reward_change_gain": 0.0,
                                          "train.start_jitter_presentations": None,
                                          "train.distance_readout": "last"}
 

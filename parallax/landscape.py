@@ -7,7 +7,9 @@ For a few (texture, distance) pairs at one lateral position this sweeps the pan 
 the mean error of each scale and the policy's expected pan step E_π[a]; then the offset where
 each stimulus's reward peaks. A peak away from 0 means the learnt dictionaries favour a
 disparity other than zero (TUNING.md: a fast-adapting dictionary made it peak 0.35° short of α*).
-Nothing is learnt; the run directory is only read.
+With ``policy.reward_change_gain`` > 0 the policy's reward-change entry is that of an eye arriving
+at each offset from the previous one by a step towards +, the way a trial sweeps from pan 0
+towards α* and, if it runs away, beyond. Nothing is learnt; the run directory is only read.
 """
 
 from __future__ import annotations
@@ -50,7 +52,11 @@ def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME
                 row_r, row_e, row_a = [], [], []
                 for offset, frame in zip(offsets, views):
                     out = exp.coder(torch.from_numpy(frame[None].copy()), learn=False)
-                    state = exp.policy_state(out.state, baseline, np.array([target + offset]), lateral)
+                    reward_here = out.reward.cpu().numpy().astype(np.float64)
+                    # with policy.reward_change_gain: as if the eye had come from the previous
+                    # offset by a leftward turn (+), as it does from pan 0 towards α* and beyond
+                    change = (reward_here, np.array([row_r[-1]]), np.ones(1)) if row_r else None
+                    state = exp.policy_state(out.state, baseline, np.array([target + offset]), lateral, change)
                     row_r.append(float(out.reward[0]))
                     row_e.append([float(e[0]) for e in out.errors.values()])
                     row_a.append(float(exp.policy.probabilities(state)[0].cpu().numpy() @ actions))

@@ -88,12 +88,17 @@ def test_a_run_saved_before_a_setting_existed_has_that_settings_old_value():
     del saved.distance["outlier_mads"]
     del saved.env["initial_pan_jitter_deg_per_m"]
     del saved.policy["eye_position_reference_m"]
+    del saved.policy["reward_change_gain"]
     del saved.train["start_jitter_presentations"]
     del saved.train["distance_readout"]
     assert set(SETTINGS_ADDED_LATER) == {"distance.lm.weight_decay", "distance.outlier_mads",
                                          "env.initial_pan_jitter_deg_per_m",
-                                         "policy.eye_position_reference_m", "train.start_jitter_presentations",
-                                         "train.distance_readout"}
+                                         "policy.eye_position_reference_m", "policy.reward_change_gain",
+                                         "train.start_jitter_presentations", "train.distance_readout"}
+    # the reward-change feature came with a default of its own: a run saved before it had none,
+    # so resuming it under the new default is a change of setting, not a silent switch
+    assert changed_settings(saved, current) == ["policy.reward_change_gain: 0.0 → 10.0"]
+    current = compose(["policy.reward_change_gain=0"])
     assert changed_settings(saved, current) == []
-    assert changed_settings(saved, compose(["distance.lm.weight_decay=0.01"])) == [
+    assert changed_settings(saved, compose(["distance.lm.weight_decay=0.01", "policy.reward_change_gain=0"])) == [
         "distance.lm.weight_decay: 0.0 → 0.01"]

@@ -301,7 +301,9 @@ def test_eye_position_feature_reaches_the_policy(tmp_path, tiny_overrides, monke
 
     from parallax.policy import NaturalActorCritic
 
-    cfg = compose(tiny_overrides + ["policy.eye_position_reference_m=0.5", "env.initial_pan_jitter_deg=1"])
+    # (the reward-change entry, on by default, would come after ν: off here)
+    cfg = compose(tiny_overrides + ["policy.eye_position_reference_m=0.5", "env.initial_pan_jitter_deg=1",
+                                    "policy.reward_change_gain=0"])
     trainer = Trainer(cfg, tmp_path)
     physics = trainer.exp.envs[0].physics
     seen, expected = [], []
@@ -321,7 +323,7 @@ def test_eye_position_feature_reaches_the_policy(tmp_path, tiny_overrides, monke
     assert len(seen) == pres.steps - 1 and len(set(seen)) > 2
     assert seen == pytest.approx(expected, rel=1e-6, abs=1e-9)
     monkeypatch.undo()
-    _train(tmp_path / "run", tiny_overrides + ["policy.eye_position_reference_m=0.5"])
+    _train(tmp_path / "run", tiny_overrides + ["policy.eye_position_reference_m=0.5", "policy.reward_change_gain=0"])
     from parallax import checkpoint
 
     actor = checkpoint.load(tmp_path / "run" / "checkpoint.pt")["experiment"]["policy"]["actor"]
