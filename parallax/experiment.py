@@ -179,7 +179,7 @@ class Experiment:
         pans, targets, start_pans = np.zeros((B, r)), np.zeros((B, r)), np.zeros((B, r))
         best_pans, best_rewards = np.zeros((B, r)), np.full((B, r), -np.inf)
 
-        prev_state = prev_action = prev_rewards = None
+        prev_state = prev_action = prev_rewards = prev_increments = None
         reference_state = None
         valid = torch.ones(B, dtype=torch.bool, device=self.device)  # every robot learns every step
         reward_sum, error_sums, n_enc = 0.0, {}, 0
@@ -205,7 +205,7 @@ class Experiment:
             best_rewards[better, p] = rewards[better]
             best_pans[better, p] = current_pans[better]
             # the last step's reward change, within the trial only (none at its first iteration)
-            change = None if iteration == 0 or prev_rewards is None else (rewards, prev_rewards, increments)
+            change = None if iteration == 0 or prev_rewards is None else (rewards, prev_rewards, prev_increments)
             state = self.policy_state(out.state, reference_state, current_pans, lateral[p], change)
             # Robots move in lockstep, so they cross a trial boundary together; the transition into
             # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
@@ -228,7 +228,7 @@ class Experiment:
                 self.coder.learn_from(encodings)   # while the next frames render
             timesteps, encodings = self._gather(futures)
             obs = [ts.observation for ts in timesteps]
-            prev_state, prev_action, prev_rewards = state, action, rewards
+            prev_state, prev_action, prev_rewards, prev_increments = state, action, rewards, increments
             steps += 1
 
         view = None

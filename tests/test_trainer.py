@@ -362,8 +362,8 @@ def test_reward_change_feature_reaches_the_policy(tmp_path, tiny_overrides, monk
     assert len(seen) == pres.steps - 1 and any(abs(g) > 1e-3 for g in seen)
     # the first iteration of every trial has no previous step
     assert all(g == 0.0 for g in seen[::t_h])
-    # within a trial: g = clip(10·Δr/|r_prev|·sign(Δpan)); rewards[k] is the reward of the image
-    # acted on at seen[k + 1 + (k // (t_h - 1))] (the update into a trial's first image is skipped)
+    # within a trial: g = clip(10·Δr/|r_prev|·sign(Δpan)). Each trial makes t_h − 1 updates, the
+    # k-th with the reward of its iteration k + 1 (the step into a trial's first image is not learnt)
     trial_rewards = [rewards[i * (t_h - 1):(i + 1) * (t_h - 1)] for i in range(len(seen) // t_h)]
     for i, rs in enumerate(trial_rewards):
         for k in range(1, len(rs)):
