@@ -26,6 +26,7 @@ import operator
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -218,12 +219,14 @@ class NaturalActorCritic(nn.Module):
         the change it made), not knowledge of the distance. Relative to |r_{t−1}| so one gain
         serves untrained and trained coders alike, whose rewards differ tenfold. The caller
         passes previous_increments = 0 where there is no previous step in the trial."""
-        rewards = torch.as_tensor(rewards, dtype=torch.float64).reshape(-1)
-        previous = torch.as_tensor(previous_rewards, dtype=torch.float64).reshape(-1)
-        direction = torch.sign(torch.as_tensor(previous_increments, dtype=torch.float64).reshape(-1))
-        relative = (rewards - previous) / previous.abs().clamp_min(1e-12)
-        change = (self.reward_change_gain * relative * direction).clamp(-1.0, 1.0)
-        return change.to(device=self.actor.device, dtype=self.actor.dtype).reshape(-1, 1)
+        # numpy on the host: a handful of (B,) values per step, where torch's per-call overhead
+        # made the whole step ~4 % slower at B = 1
+        rewards = np.asarray(rewards, dtype=np.float64).reshape(-1)
+        previous = np.asarray(previous_rewards, dtype=np.float64).reshape(-1)
+        direction = np.sign(np.asarray(previous_increments, dtype=np.float64).reshape(-1))
+        relative = (rewards - previous) / np.maximum(np.abs(previous), 1e-12)
+        change = np.clip(self.reward_change_gain * relative * direction, -1.0, 1.0)
+        return torch.from_numpy(change.reshape(-1, 1)).to(device=self.actor.device, dtype=self.actor.dtype)
 
     def _logits(self, features: torch.Tensor) -> torch.Tensor:
         return features @ self.actor.T / self.temperature
