@@ -205,7 +205,7 @@ class Experiment:
             best_rewards[better, p] = rewards[better]
             best_pans[better, p] = current_pans[better]
             # the last step's reward change, within the trial only (none at its first iteration)
-            change = None if iteration == 0 or prev_rewards is None else (rewards, prev_rewards, prev_increments)
+            change = None if iteration == 0 else (rewards, prev_rewards, prev_increments)
             state = self.policy_state(out.state, reference_state, current_pans, lateral[p], change)
             # Robots move in lockstep, so they cross a trial boundary together; the transition into
             # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
