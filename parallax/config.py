@@ -79,8 +79,10 @@ def load_run_config(run_dir: str | Path) -> DictConfig:
 RESULT_NEUTRAL_KEYS = frozenset({"device", "resume", "train.threads", "train.checkpoint_every",
                                  "train.image_every"})
 #: Settings that may differ when a run is resumed: those, and train.presentations (which only
-#: changes how long the run goes on).
-RESUMABLE_CHANGES = RESULT_NEUTRAL_KEYS | {"train.presentations"}
+#: changes how long the run goes on). perturbation.start_fraction may differ too, so long as the
+#: presentation it starts at (with train.presentations, :func:`perturbation_start`) does not: a
+#: finished run's continuation after the perturbation is lengthened with both.
+RESUMABLE_CHANGES = RESULT_NEUTRAL_KEYS | {"train.presentations", "perturbation.start_fraction"}
 
 
 def _freeze(value: Any) -> Any:
@@ -124,11 +126,18 @@ def changed_settings(saved: DictConfig, current: DictConfig) -> list[str]:
     """``key: saved → current`` for every setting that differs between a run's saved config and
     the config it is being resumed with (RESUMABLE_CHANGES aside). A default changed in conf/
     since the run started shows up here, so a resumed run never mixes two settings silently."""
-    before = run_settings(OmegaConf.to_container(saved, resolve=True))
-    after = run_settings(OmegaConf.to_container(current, resolve=True))
-    return [f"{key}: {before.get(key, '(unset)')!r} → {after.get(key, '(unset)')!r}"
-            for key in sorted(set(before) | set(after))
-            if key not in RESUMABLE_CHANGES and before.get(key) != after.get(key)]
+    saved_dict = OmegaConf.to_container(saved, resolve=True)
+    current_dict = OmegaConf.to_container(current, resolve=True)
+    before, after = run_settings(saved_dict), run_settings(current_dict)
+    changes = [f"{key}: {before.get(key, '(unset)')!r} → {after.get(key, '(unset)')!r}"
+               for key in sorted(set(before) | set(after))
+               if key not in RESUMABLE_CHANGES and before.get(key) != after.get(key)]
+    # train.presentations alone would move a fractional perturbation start: compare where it starts
+    start_before, start_after = perturbation_start(saved_dict), perturbation_start(current_dict)
+    if start_before != start_after:
+        changes.append("the perturbation's start presentation (perturbation.start_fraction × "
+                       f"train.presentations): {start_before} → {start_after}")
+    return changes
 
 
 def perturbation_start(cfg) -> int | None:

@@ -102,3 +102,21 @@ def test_a_run_saved_before_a_setting_existed_has_that_settings_old_value():
     assert changed_settings(saved, current) == []
     assert changed_settings(saved, compose(["distance.lm.weight_decay=0.01", "policy.reward_change_gain=0"])) == [
         "distance.lm.weight_decay: 0.0 → 0.01"]
+
+
+def test_a_run_is_lengthened_only_where_its_perturbation_stays():
+    from omegaconf import OmegaConf
+
+    from parallax.config import changed_settings, perturbation_start
+
+    saved = compose(["perturbation=rotate_blur", "train.presentations=200", "perturbation.start_fraction=0.6667"])
+    assert perturbation_start(saved) == 133
+    # more presentations with the start moved back to presentation 133: a longer continuation
+    longer = compose(["perturbation=rotate_blur", "train.presentations=400", "perturbation.start_fraction=0.3325"])
+    assert changed_settings(saved, longer) == []
+    # more presentations alone would switch the perturbation on at 267, after the run had it on
+    moved = compose(["perturbation=rotate_blur", "train.presentations=400", "perturbation.start_fraction=0.6667"])
+    assert changed_settings(saved, moved) == [
+        "the perturbation's start presentation (perturbation.start_fraction × train.presentations): 133 → 267"]
+    unperturbed = OmegaConf.merge(saved, {"perturbation": {"start_fraction": None}})
+    assert any("start presentation" in change for change in changed_settings(saved, unperturbed))

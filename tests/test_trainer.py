@@ -85,6 +85,20 @@ def test_resume_in_process_matches_uninterrupted(tmp_path, tiny_overrides, extra
             == (tmp_path / "full" / "metrics.jsonl").read_text())
 
 
+def test_a_finished_run_lengthened_after_its_perturbation_matches_the_longer_run(tmp_path, tiny_overrides):
+    # §5's continuation made longer: a 4-presentation run perturbed from presentation 2 on, then
+    # the same directory with 6 presentations and the start fraction that keeps presentation 2
+    perturbed = tiny_overrides + ["perturbation=rotate_blur"]
+    longer = perturbed + ["perturbation.start_fraction=0.3333"]
+    full = _train(tmp_path / "full", longer)
+    _train(tmp_path / "part", perturbed + ["train.presentations=4", "perturbation.start_fraction=0.5"])
+    resumed = _train(tmp_path / "part", longer)
+    assert _without_timing(resumed) == _without_timing(full)
+    assert resumed["before_perturbation"]["presentations"] == 2
+    assert ((tmp_path / "part" / "metrics.jsonl").read_text()
+            == (tmp_path / "full" / "metrics.jsonl").read_text())
+
+
 def test_the_start_jitter_ends_after_start_jitter_presentations(tmp_path, tiny_overrides):
     _train(tmp_path, tiny_overrides + ["env.initial_pan_jitter_deg=1", "train.start_jitter_presentations=4"])
     records = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
