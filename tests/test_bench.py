@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from parallax import bench
 from parallax.config import compose
 
@@ -18,6 +20,13 @@ def test_coder_work_counts_the_paper_patches():
     # 529 coarse patches (23×23 after ×8), 289 fine ones (17×17 after ×2)
     assert coarse["flops"] == 2 * 529 * K * N + 2 * N * N * K + 2 * k * 529 * N + 4 * 529 * k * K + 2 * 529 * k
     assert fine["flops"] < coarse["flops"]
+    # the Gram matrix is made once per lockstep: 16 robots cost less than 16 single frames
+    assert coarse["shared_flops"] == 2 * N * N * K
+    limits = {"matmul_gflops": 100.0, "copy_gbps": 1e6}   # compute-bound
+    one, sixteen = bench.coder_bound_ms(both, limits, 1), bench.coder_bound_ms(both, limits, 16)
+    assert one == pytest.approx(both["flops"] / 1e8)
+    assert sixteen == pytest.approx((16 * (both["flops"] - both["shared_flops"]) + both["shared_flops"]) / 1e8)
+    assert sixteen < 16 * one
 
 
 def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
@@ -31,4 +40,5 @@ def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
     assert report["end_to_end"]["cpu"]["B=1"]["trainer_steps_per_second"] > 0
     cpu = report["roofline"]["cpu"]
     assert cpu["coder_bound_ms_per_frame"] > 0
+    assert report["end_to_end"]["cpu"]["B=1"]["coder_bound_ms"] == cpu["coder_bound_ms_per_frame"]
     assert cpu["matmul_gflops"] > 0 and cpu["copy_gbps"] > 0
