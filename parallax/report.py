@@ -34,6 +34,7 @@ from hydra.errors import HydraException
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 from yaml import YAMLError
+from yaml import safe_load as yaml_load
 
 from parallax import paper_results as paper
 from parallax.config import RESULT_NEUTRAL_KEYS, perturbation_start, run_settings
@@ -507,29 +508,68 @@ class PaperSelection:
         return not self.columns and not self.rows
 
 
-def _pick(candidates: list[Group], what: str, notes: list[str], prefer_weighting: bool = True) -> Group | None:
-    """One group for a table cell: most seeds, then the preferred weighting; the others noted."""
+def parse_preferences(items: Iterable[str]) -> dict[str, Any]:
+    """``--prefer KEY=VALUE`` options as {dotted key: value}, the value read as YAML (0.1 → 0.1)."""
+    preferences: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ReportError(f"--prefer {item!r}: expected KEY=VALUE, e.g. distance.y=0.1")
+        try:
+            preferences[key.strip()] = _freeze_like_flat(yaml_load(value))
+        except YAMLError as exc:
+            raise ReportError(f"--prefer {item!r}: the value is not YAML ({exc})") from None
+    return preferences
+
+
+def _freeze_like_flat(value: Any) -> Any:
+    """A preference value in the form run settings take (lists become tuples)."""
+    if isinstance(value, list):
+        return tuple(_freeze_like_flat(v) for v in value)
+    return value
+
+
+def _matches(group: Group, preferences: dict[str, Any]) -> int:
+    """How many of the preferred settings the group has."""
+    return sum(key in group.flat and group.flat[key] == value for key, value in preferences.items())
+
+
+def _pick(candidates: list[Group], what: str, notes: list[str], prefer_weighting: bool = True,
+          preferences: dict[str, Any] | None = None) -> Group | None:
+    """One group for a table cell: the most preferred settings (``--prefer``), then the most
+    seeds, then the preferred weighting; the others noted."""
     if not candidates:
         return None
-    ranked = sorted(candidates, key=lambda g: (-g.n, g.weighting_effective != prefer_weighting, g.gid))
+    preferences = preferences or {}
+    ranked = sorted(candidates, key=lambda g: (-_matches(g, preferences), -g.n,
+                                               g.weighting_effective != prefer_weighting, g.gid))
     if len(ranked) > 1:
         others = ", ".join(f"{g.gid} ({g.label})" for g in ranked[1:])
+        why = ("the one with the most of the settings asked for (--prefer)"
+               if _matches(ranked[0], preferences) > _matches(ranked[1], preferences) else "the one with the most seeds")
         notes.append(f"{what}: {len(ranked)} groups fit; shown {ranked[0].gid} ({ranked[0].label}), "
-                     f"the one with the most seeds; not shown: {others}.")
+                     f"{why}; not shown: {others}.")
     return ranked[0]
 
 
-def select_paper_groups(groups: Sequence[Group]) -> PaperSelection:
-    """Match groups to the paper's columns and rows by their lateral list L and weighting."""
+def select_paper_groups(groups: Sequence[Group], preferences: dict[str, Any] | None = None) -> PaperSelection:
+    """Match groups to the paper's columns and rows by their lateral list L and weighting;
+    where several fit, ``preferences`` ({setting: value}) decide first."""
+    preferences = preferences or {}
+    unknown = [f"{key}={value!r}" for key, value in preferences.items()
+               if not any(g.flat.get(key, object()) == value for g in groups)]
+    if groups and unknown:
+        raise ReportError(f"--prefer {', '.join(unknown)}: no group of runs has that setting")
     notes: list[str] = []
     columns: dict[tuple[str, str], Group] = {}
     for position in paper.TABLE_POSITIONS_CM:
         chosen = _pick([g for g in groups if g.lateral_labels == [position]],
-                       f"Tables 2–3, {paper.SINGLE} {position} cm", notes)
+                       f"Tables 2–3, {paper.SINGLE} {position} cm", notes, preferences=preferences)
         if chosen is not None:
             columns[(paper.SINGLE, position)] = chosen
     for column, labels in paper.MULTI_LISTS_CM.items():
-        chosen = _pick([g for g in groups if tuple(g.lateral_labels) == labels], f"Tables 2–3, {column}", notes)
+        chosen = _pick([g for g in groups if tuple(g.lateral_labels) == labels], f"Tables 2–3, {column}", notes,
+                       preferences=preferences)
         if chosen is not None:
             for position in paper.TABLE_POSITIONS_CM:
                 if position in labels:
@@ -540,7 +580,8 @@ def select_paper_groups(groups: Sequence[Group]) -> PaperSelection:
         # a group whose queue never filled has no distance error: prefer one that has
         measured = [g for g in fits if any(_total(r.online_distance("before")) is not None
                                            or _total(r.summary.get("distance_error")) is not None for r in g.runs)]
-        chosen = _pick(measured or fits, f"Tables 4–5, {row}", notes, prefer_weighting=weighted)
+        chosen = _pick(measured or fits, f"Tables 4–5, {row}", notes, prefer_weighting=weighted,
+                       preferences=preferences)
         if chosen is not None:
             rows[row] = chosen
     return PaperSelection(columns, rows, notes)
@@ -956,8 +997,12 @@ def _run_record(run: Run) -> dict:
 
 
 def build_report(paths: Sequence[str | Path], out: Path | None = None, name: str = "README.md",
-                 title: str = "parallax results", tables: str = "all", notes: str | None = None) -> tuple[str, dict]:
-    """Read the runs below `paths`; write Markdown, figures and JSON into `out` (if given)."""
+                 title: str = "parallax results", tables: str = "all", notes: str | None = None,
+                 prefer: Sequence[str] = ()) -> tuple[str, dict]:
+    """Read the runs below `paths`; write Markdown, figures and JSON into `out` (if given).
+    ``prefer``: KEY=VALUE settings that decide which group fills a paper table's cell where
+    several fit (e.g. two weighted 5–20 cm groups with different y)."""
+    preferences = parse_preferences(prefer)
     if tables not in TABLE_CHOICES:
         raise ReportError(f"--tables must be one of {', '.join(TABLE_CHOICES)}, got {tables!r}")
     run_dirs = list(dict.fromkeys(p.resolve() for path in paths for p in find_run_dirs(path)))
@@ -999,7 +1044,7 @@ def build_report(paths: Sequence[str | Path], out: Path | None = None, name: str
     if groups:
         md += ["## Runs", "", overview_table(groups), ""]
 
-    selection = select_paper_groups(groups)
+    selection = select_paper_groups(groups, preferences)
     if tables in ("all", "paper") and not selection.empty:
         paper_data: dict[str, Any] = {"notes": selection.notes}
         md += ["## The paper's tables, ours beside theirs", ""]
@@ -1091,6 +1136,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--tables", choices=TABLE_CHOICES, default="all",
                         help="paper: Tables 2–5 and Figs. 10–11; ablation: one table per varying setting; all")
     parser.add_argument("--notes", default=None, help="a Markdown file put under the title (your reading)")
+    parser.add_argument("--prefer", action="append", default=[], metavar="KEY=VALUE",
+                        help="where several groups fit a cell of the paper's tables, show the one with this "
+                             "setting (repeatable), e.g. --prefer distance.y=0.1")
     args = parser.parse_args(argv)
     try:
         notes = None
@@ -1100,7 +1148,7 @@ def main(argv: list[str] | None = None) -> None:
                 raise ReportError(f"--notes {args.notes}: no such file")
             notes = notes_path.read_text()
         markdown, _ = build_report(args.paths, Path(args.out) if args.out else None, name=args.name,
-                                   title=args.title, tables=args.tables, notes=notes)
+                                   title=args.title, tables=args.tables, notes=notes, prefer=args.prefer)
     except ReportError as exc:
         print(f"parallax-report: error: {exc}", file=sys.stderr)
         sys.exit(2)

@@ -188,6 +188,35 @@ def test_paper_tables_put_ours_beside_the_published_numbers(paper_sweep, tmp_pat
     assert "## Held-out textures and distances between the grid points" in markdown
 
 
+def test_prefer_decides_which_of_two_fitting_groups_fills_the_paper_tables(tmp_path, capsys):
+    # two weighted 5–20 cm groups, the paper's y and another, three seeds each, with evals
+    rng = np.random.default_rng(11)
+    root = tmp_path / "runs"
+    totals: dict[str, list[float]] = {}
+    for y in ("1.0", "0.1"):
+        cfg = compose(["experiment=paper_multi_5_20_weighted", "train.presentations=10", f"distance.y={y}"])
+        for seed in range(3):
+            run_dir = root / f"y={y},seed={seed}"
+            write_run(run_dir, cfg, seed, rng)
+            before = write_eval(run_dir, rng, 5, False, sub="eval_before")
+            write_eval(run_dir, rng, 10, True)
+            totals.setdefault(y, []).append(before["distance"]["by_range"]["total"])
+    total_column = 3 + RANGES.index("total")
+    for y in ("1.0", "0.1"):
+        markdown, _ = build_report([root], None, tables="paper", prefer=[f"distance.y={y}"])
+        row = row_of(table_block(markdown, "**Table 4**"), paper.WEIGHTING_5_20)
+        assert row[total_column].startswith(cell_text(totals[y]))
+        assert "the one with the most of the settings asked for (--prefer)" in markdown
+    with pytest.raises(SystemExit) as exc:
+        main([str(root), "--prefer", "distance.y=0.3"])
+    assert exc.value.code == 2
+    assert capsys.readouterr().err.strip() == (
+        "parallax-report: error: --prefer distance.y=0.3: no group of runs has that setting")
+    with pytest.raises(SystemExit):
+        main([str(root), "--prefer", "distance.y"])
+    assert "expected KEY=VALUE" in capsys.readouterr().err
+
+
 def test_ablation_tables_failed_jobs_and_duplicates(tmp_path):
     rng = np.random.default_rng(3)
     sweep, other_sweep = tmp_path / "multirun" / "y", tmp_path / "multirun" / "again"
