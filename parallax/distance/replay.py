@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 from typing import Iterable, Sequence
 
+import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
@@ -82,6 +83,10 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbatio
     except Exception as exc:  # OmegaConf's errors are long; one line naming the value is enough
         raise ReplayError(f"cannot apply {list(overrides)} to {run_dir}: {str(exc).splitlines()[0]}") from None
     summary = json.loads(summary_path.read_text())
+    if int(cfg.train.threads) > 0:
+        # as in training and parallax-eval: two replays side by side, each with two intra-op
+        # threads on a 2-core machine, took minutes per run instead of seconds
+        torch.set_num_threads(int(cfg.train.threads))
     robots = int(cfg.env.get("robots", 1))
     learner = instantiate(cfg.distance, lateral_positions=[float(l) for l in cfg.curriculum.lateral_positions],
                           seed=seeds_for(int(cfg.seed), robots + 3)[robots + 2])
@@ -220,7 +225,7 @@ def main(argv: list[str] | None = None) -> None:
                 write_replay(result, target)
                 total = result["summary"]["distance_error"].get("total")
                 shown = f"{total:.2f}%" if total is not None else "— (queue never filled)"
-                print(f"[replay] {source.name} {' '.join(combo) or '(as trained)'}: distance error {shown}")
+                print(f"[replay] {source.name} {' '.join(combo) or '(as trained)'}: distance error {shown}", flush=True)
     except (ReplayError, FileNotFoundError) as exc:
         sys.exit(f"parallax-replay: {exc}")
 
