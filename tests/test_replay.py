@@ -127,6 +127,29 @@ def test_replayed_learners_are_scored_on_the_evals_eye_movements(perturbed_run, 
     from parallax.report import load_run
 
     assert load_run(written.parent).final_eval() is not None
+    # what was scored, a total each: online, then every rescored eval (held-out grid)
+    from parallax.distance.replay import replay_totals
+
+    totals = replay_totals(replay(perturbed_run))
+    assert list(totals) == ["online", "eval.json", "eval_before/eval.json"]
+    assert totals["eval.json"] == pytest.approx(after["distance"]["by_range"]["total"], nan_ok=True)
+
+
+def test_the_cli_prints_each_runs_totals_and_their_spread(perturbed_run, tmp_path, capsys):
+    from parallax.evaluate import evaluate
+
+    if not (perturbed_run / "eval.json").is_file():
+        evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5])
+    twin = tmp_path / "twin"   # the same run under a second name: two sources, equal totals
+    twin.symlink_to(perturbed_run, target_is_directory=True)
+    main([str(perturbed_run), str(twin), "--out", str(tmp_path / "out"), "distance.queue_size=3"])
+    lines = capsys.readouterr().out.splitlines()
+    per_run = [line for line in lines if ": distance error online " in line]
+    assert len(per_run) == 2 and per_run[0].split(": ", 1)[1] == per_run[1].split(": ", 1)[1]
+    assert "eval.json" in per_run[0]
+    (spread,) = [line for line in lines if "mean ± sd over runs" in line]
+    assert spread.startswith("[replay] distance.queue_size=3, mean ± sd over runs: online ")
+    assert "± 0.00 % (n=2)" in spread
 
 
 def test_evals_without_a_ready_learner_still_give_their_eye_movements():

@@ -23,6 +23,7 @@ import argparse
 import copy
 import itertools
 import json
+import statistics
 import sys
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -218,16 +219,43 @@ def main(argv: list[str] | None = None) -> None:
         combos = parse_sweep(overrides)
         sources = find_sources(paths)
         out = Path(args.out)
+        totals: dict[str, dict[str, list[float]]] = {}   # combo → what was scored → one total per source
         for source in sources:
             for combo in combos:
                 target = out / source.name / run_name(",".join(combo))
                 result = replay(source, combo, until_perturbation=args.until_perturbation)
                 write_replay(result, target)
-                total = result["summary"]["distance_error"].get("total")
-                shown = f"{total:.2f}%" if total is not None else "— (queue never filled)"
-                print(f"[replay] {source.name} {' '.join(combo) or '(as trained)'}: distance error {shown}", flush=True)
+                scored = replay_totals(result)
+                for what, total in scored.items():
+                    totals.setdefault(" ".join(combo) or "(as trained)", {}).setdefault(what, []).append(total)
+                print(f"[replay] {source.name} {' '.join(combo) or '(as trained)'}: distance error "
+                      f"{_format_totals(scored) or '— (queue never filled)'}", flush=True)
+        if len(sources) > 1:
+            for combo, scored in totals.items():
+                spread = {what: f"{statistics.fmean(v):.2f} ± {statistics.stdev(v) if len(v) > 1 else 0.0:.2f} % "
+                                f"(n={len(v)})" for what, v in scored.items()}
+                print(f"[replay] {combo}, mean ± sd over runs: "
+                      + "; ".join(f"{what} {text}" for what, text in spread.items()), flush=True)
     except (ReplayError, FileNotFoundError) as exc:
         sys.exit(f"parallax-replay: {exc}")
+
+
+def replay_totals(result: dict) -> dict[str, float]:
+    """The replayed learner's total distance errors (%): online over the training stream, then
+    each rescored parallax-eval file's grid (held-out photographs), by the file's path."""
+    totals = {}
+    online = result["summary"]["distance_error"].get("total")
+    if online is not None:
+        totals["online"] = float(online)
+    for relative, evaluation in sorted(result.get("evals", {}).items()):
+        total = (evaluation.get("distance") or {}).get("by_range", {}).get("total")
+        if total is not None:
+            totals[relative] = float(total)
+    return totals
+
+
+def _format_totals(totals: dict[str, float]) -> str:
+    return ", ".join(f"{what} {value:.2f}%" for what, value in totals.items())
 
 
 if __name__ == "__main__":
