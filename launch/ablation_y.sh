@@ -10,7 +10,7 @@ source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
 out="$(px_sweep_dir ablation_y)"
 status=0
 px_distance_source "$@" || status=$?
-px_replay "$out" distance.weighting=true distance.y=0.25,0.5,1,2,4 || status=$?
+px_replay "$out" distance.weighting=true distance.y=0.05,0.1,0.25,0.5,1,2,4 || status=$?
 px_replay "$out" distance.weighting=false || status=$?
 px_report "$report_root/ablations" y.md "Ablation: the weighting hyper-parameter y (paper eq. 12)" \
   ablation "$out"
