@@ -160,3 +160,32 @@ def test_evals_without_a_ready_learner_still_give_their_eye_movements():
         "distance": kept, "distance_between_grid": kept}
     assert _eval_samples({"distance": {"by_range": {}, "samples": kept}}) == {"distance": kept}
     assert _eval_samples({"mae": {}}) == {}
+
+
+def test_replayed_checkpoints_hold_the_replayed_learner(perturbed_run, tmp_path):
+    """As trained, the replay writes the run's own checkpoints back; with another queue size, the
+    checkpoints carry that learner, and parallax-eval on them scores what the replay rescored."""
+    import torch
+
+    from parallax import checkpoint
+    from parallax.evaluate import evaluate
+
+    main([str(perturbed_run), "--out", str(tmp_path / "same")])
+    (same,) = [p.parent for p in (tmp_path / "same").rglob("summary.json")]
+    for name in ("checkpoint.pt", "checkpoint_before_perturbation.pt"):
+        original, replayed = checkpoint.load(perturbed_run / name), checkpoint.load(same / name)
+        for part in ("distance", "coder", "policy"):
+            for key, value in original["experiment"][part].items():
+                if isinstance(value, torch.Tensor):
+                    assert torch.equal(value, replayed["experiment"][part][key]), (name, part, key)
+
+    if not (perturbed_run / "eval.json").is_file():
+        evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5])
+    # (the tiny run's positions are not sensitive, so y would change nothing: c does)
+    main([str(perturbed_run), "--out", str(tmp_path / "other"), "distance.queue_size=4"])
+    (other,) = [p.parent for p in (tmp_path / "other").rglob("summary.json")]
+    rescored = json.loads((other / "eval.json").read_text())["distance"]
+    fresh = evaluate(other, distances=[4.0, 6.0], between=[5.5], out=tmp_path / "fresh")["distance"]
+    assert fresh["by_range"] == pytest.approx(rescored["by_range"], nan_ok=True)
+    trained = evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5], out=tmp_path / "trained")["distance"]
+    assert fresh["per_distance"] != trained["per_distance"]   # c = 4 is another learner

@@ -32,6 +32,8 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
+from parallax import checkpoint
+from parallax.checkpoint import BEFORE_PERTURBATION_NAME, CHECKPOINT_NAME
 from parallax.config import DISTANCE_READOUTS, READOUT_PANS, RUN_CONFIG_NAME, distance_readout, load_run_config, run_name
 from parallax.experiment import seeds_for
 from parallax.metrics import DistanceErrorTracker, learn_online
@@ -104,14 +106,16 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbatio
     if records and key not in records[0]:
         raise ReplayError(f"{run_dir / METRICS_NAME} has no best_pans (the run predates their logging): "
                           "it can be replayed with train.distance_readout=last only")
+    before_tracker = last_stats = before_stats = None
     for record in records[: int(summary["presentations"])]:
         if record["perturbed"] and before is None:
             before = tracker.by_range()
             before_learner = copy.deepcopy(learner)  # the model of checkpoint_before_perturbation.pt
+            before_tracker, before_stats = copy.deepcopy(tracker), last_stats
             if until_perturbation:
                 break
         if record["learnt_distance"]:
-            learn_online(learner, tracker, record[key], record["distances"])
+            last_stats = learn_online(learner, tracker, record[key], record["distances"]) or last_stats
     cut = until_perturbation and summary.get("before_perturbation") is not None
     evals = _rescore_evals(run_dir, summary, before_learner, None if cut else learner, readout)
     if cut:
@@ -121,7 +125,22 @@ def replay(run_dir: str | Path, overrides: Sequence[str] = (), until_perturbatio
         summary["before_perturbation"]["distance_error"] = before or {}
     summary["replayed_from"] = str(run_dir)
     summary["replay_overrides"] = list(overrides)
-    return {"config": cfg, "summary": summary, "evals": evals}
+    checkpoints = {CHECKPOINT_NAME: (learner, tracker, last_stats),
+                   BEFORE_PERTURBATION_NAME: (before_learner, before_tracker, before_stats)}
+    return {"config": cfg, "summary": summary, "evals": evals, "source": run_dir,
+            "checkpoints": {name: parts for name, parts in checkpoints.items() if parts[0] is not None}}
+
+
+def _replayed_checkpoint(source: Path, learner, tracker, stats, before_perturbation) -> dict:
+    """The source's checkpoint with the replayed distance learner (and its online-error tracker)
+    in place of the trained one: the eye, coder and policy are the source's, as in the replay."""
+    state = checkpoint.load(source, map_location="cpu")
+    state["experiment"]["distance"] = learner.state_dict()
+    state["dist"] = tracker.state_dict()
+    state["last_distance_stats"] = stats
+    if "before_perturbation" in state and state["before_perturbation"] is not None:
+        state["before_perturbation"] = before_perturbation
+    return state
 
 
 def _rescore_evals(run_dir: Path, summary: dict, before_learner, final_learner,
@@ -192,7 +211,14 @@ def find_sources(paths: Iterable[str | Path]) -> list[Path]:
 
 
 def write_replay(result: dict, out_dir: Path) -> None:
+    """The replay as a run directory: config, summary, the rescored evals and, for a whole
+    replay, the source's checkpoints with the replayed learner (so parallax-eval runs on it)."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    for name, (learner, tracker, stats) in result.get("checkpoints", {}).items():
+        source = result["source"] / name
+        if source.is_file():
+            state = _replayed_checkpoint(source, learner, tracker, stats, result["summary"].get("before_perturbation"))
+            checkpoint.save_atomic(state, out_dir / name)
     (out_dir / RUN_CONFIG_NAME).write_text(OmegaConf.to_yaml(result["config"], resolve=True))
     (out_dir / SUMMARY_NAME).write_text(json.dumps(result["summary"], indent=2) + "\n")
     for relative, evaluation in result.get("evals", {}).items():
