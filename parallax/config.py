@@ -85,12 +85,12 @@ RESULT_NEUTRAL_KEYS = frozenset({"device", "resume", "train.threads", "train.che
 RESUMABLE_CHANGES = RESULT_NEUTRAL_KEYS | {"train.presentations", "perturbation.start_fraction"}
 
 
-def _freeze(value: Any) -> Any:
-    """A hashable copy of a config value (lists become tuples)."""
+def freeze_value(value: Any) -> Any:
+    """A hashable copy of a config value (lists become tuples), as run settings hold it."""
     if isinstance(value, dict):
-        return tuple(sorted((k, _freeze(v)) for k, v in value.items()))
+        return tuple(sorted((k, freeze_value(v)) for k, v in value.items()))
     if isinstance(value, (list, tuple)):
-        return tuple(_freeze(v) for v in value)
+        return tuple(freeze_value(v) for v in value)
     return value
 
 
@@ -102,7 +102,7 @@ def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
         if isinstance(value, dict) and value:
             flat.update(flatten(value, dotted + "."))
         else:
-            flat[dotted] = _freeze(value)
+            flat[dotted] = freeze_value(value)
     return flat
 
 

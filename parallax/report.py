@@ -37,7 +37,7 @@ from yaml import YAMLError
 from yaml import safe_load as yaml_load
 
 from parallax import paper_results as paper
-from parallax.config import RESULT_NEUTRAL_KEYS, perturbation_start, run_settings
+from parallax.config import RESULT_NEUTRAL_KEYS, freeze_value, perturbation_start, run_settings
 from parallax.metrics import position_label
 
 SUMMARY_NAME = "summary.json"
@@ -516,17 +516,10 @@ def parse_preferences(items: Iterable[str]) -> dict[str, Any]:
         if not sep or not key.strip():
             raise ReportError(f"--prefer {item!r}: expected KEY=VALUE, e.g. distance.y=0.1")
         try:
-            preferences[key.strip()] = _freeze_like_flat(yaml_load(value))
+            preferences[key.strip()] = freeze_value(yaml_load(value))
         except YAMLError as exc:
             raise ReportError(f"--prefer {item!r}: the value is not YAML ({exc})") from None
     return preferences
-
-
-def _freeze_like_flat(value: Any) -> Any:
-    """A preference value in the form run settings take (lists become tuples)."""
-    if isinstance(value, list):
-        return tuple(_freeze_like_flat(v) for v in value)
-    return value
 
 
 def _matches(group: Group, preferences: dict[str, Any]) -> int:

@@ -251,10 +251,10 @@ def main(argv: list[str] | None = None) -> None:
                 target = out / source.name / run_name(",".join(combo))
                 result = replay(source, combo, until_perturbation=args.until_perturbation)
                 write_replay(result, target)
-                scored = replay_totals(result)
+                scored, label = replay_totals(result), " ".join(combo) or "(as trained)"
                 for what, total in scored.items():
-                    totals.setdefault(" ".join(combo) or "(as trained)", {}).setdefault(what, []).append(total)
-                print(f"[replay] {source.name} {' '.join(combo) or '(as trained)'}: distance error "
+                    totals.setdefault(label, {}).setdefault(what, []).append(total)
+                print(f"[replay] {source.name} {label}: distance error "
                       f"{_format_totals(scored) or '— (queue never filled)'}", flush=True)
         if len(sources) > 1:
             for combo, scored in totals.items():
