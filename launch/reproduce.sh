@@ -21,7 +21,9 @@
 # trials starting from a random pan in ±2°, weight decay 0.1 in the LM fit, and (session 6) the
 # eye's own pan as one more policy feature; (session 9) the last step's signed change of reward
 # as one more policy feature, with gain 10 (30 in the single-position runs since session 10:
-# SINGLE_IMPROVEMENTS). Since session 7 the random start ends after a
+# SINGLE_IMPROVEMENTS); (session 11) the distance learner reads each trial's pan where the
+# coder's reward peaked instead of its last pan (train.distance_readout=best_reward; parallax-eval
+# then reads the same pan). Since session 7 the random start ends after a
 # warm-up (train.start_jitter_presentations: 100 single, 50 for 5–10 cm, 33 for 5–20 cm), so the
 # last 100 trials before the perturbation, which Table 2 averages, start from pan 0 as the
 # paper's did; the 5–10 cm runs got 300 presentations so that their 150 before the perturbation
@@ -41,7 +43,7 @@ sweep="$(px_sweep_dir reproduce)"
 unweighted="$(px_sweep_dir reproduce_unweighted)"
 five_ten_c50="$(px_sweep_dir reproduce_5_10_c50)"
 seeds="seed=${SEEDS:-0,1,2}"
-read -ra improvements <<< "${IMPROVEMENTS-policy.feature_norm=difference env.initial_pan_jitter_deg=2 distance.lm.weight_decay=0.1 policy.eye_position_reference_m=0.5 policy.reward_change_gain=10}"
+read -ra improvements <<< "${IMPROVEMENTS-policy.feature_norm=difference env.initial_pan_jitter_deg=2 distance.lm.weight_decay=0.1 policy.eye_position_reference_m=0.5 policy.reward_change_gain=10 train.distance_readout=best_reward}"
 if [[ -z "${IMPROVEMENTS+set}" ]]; then default_single_improvements="policy.reward_change_gain=30"; else default_single_improvements=""; fi
 read -ra single_improvements <<< "${SINGLE_IMPROVEMENTS-$default_single_improvements}"
 singles=paper_single_5,paper_single_7,paper_single_10,paper_single_13,paper_single_15,paper_single_20

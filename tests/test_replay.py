@@ -92,6 +92,11 @@ def test_bad_overrides_are_refused_with_the_value():
         parse_sweep(["coder.atoms=4"])
     with pytest.raises(ReplayError, match="'distance.y' is neither an existing directory"):
         parse_sweep(["distance.y"])
+    with pytest.raises(ReplayError, match="train.presentations=4"):
+        parse_sweep(["train.presentations=4"])
+    # the readout only picks which logged pan builds s, so the command line sweeps it too
+    assert parse_sweep(["train.distance_readout=best_reward,last"]) == [
+        ["train.distance_readout=best_reward"], ["train.distance_readout=last"]]
     assert parse_sweep(["distance.y=1,2", "distance.weighting=false"]) == [
         ["distance.y=1", "distance.weighting=false"], ["distance.y=2", "distance.weighting=false"]]
 

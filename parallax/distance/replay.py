@@ -2,8 +2,9 @@
 
 The distance learner never acts on the world: the eye-movement vectors s it sees depend only on
 the world, the coder and the policy. So a run's metrics.jsonl, which logs every s with its true
-distance in order, lets the learner be re-run with another weighting y, queue size c or weighting
-on/off, and the result is exactly what `parallax-train` would have reported with that setting and
+distance in order, lets the learner be re-run with another weighting y, queue size c, weighting
+on/off or readout (``train.distance_readout``: each trial's last and best-encoded pans are both
+logged), and the result is exactly what `parallax-train` would have reported with that setting and
 the same seed (tests/test_replay.py checks this bit for bit). That makes the y, c and weighting
 ablations of Table 4 cost seconds per setting instead of a full run each.
 
@@ -52,9 +53,10 @@ def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
         key, sep, values = item.partition("=")
         if not sep or not key or not values:
             raise ReplayError(f"{item!r} is neither an existing directory nor an override KEY=VALUE[,VALUE…]")
-        if not key.startswith("distance."):
-            raise ReplayError(f"override {item!r}: only distance.* settings can be replayed "
-                              "(anything else changes the eye movements: train a new run)")
+        # the readout only picks which of the two logged pans of each trial s is built from
+        if not (key.startswith("distance.") or key == "train.distance_readout"):
+            raise ReplayError(f"override {item!r}: only distance.* settings and train.distance_readout "
+                              "can be replayed (anything else changes the eye movements: train a new run)")
         axes.append([f"{key}={v}" for v in values.split(",")])
     return [list(combo) for combo in itertools.product(*axes)] if axes else [[]]
 
