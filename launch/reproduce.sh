@@ -5,7 +5,7 @@
 #   single lateral positions 5, 7, 10, 13, 15, 20 cm     400 presentations (12 000 iterations)
 #   multiple positions 5–10 cm                            300 presentations (54 000 iterations)
 #   multiple positions 5–20 cm with weighting             400 presentations (192 000 iterations),
-#                                                         queue c = 100, y = 0.1 (the shipped y)
+#                                                         queue c = 100, y = 1 (see below)
 # The single and 5–10 cm runs have §5's robustness test (left camera rotated 15°, blur σ = 2,
 # training continuing) in their second half, as in conf/perturbation/rotate_blur.yaml; the
 # 5–20 cm runs from presentation 133 on (start fraction 0.3325 of 400), so that 133 presentations
@@ -23,7 +23,9 @@
 # as one more policy feature, with gain 10 (30 in the single-position runs since session 10:
 # SINGLE_IMPROVEMENTS); (session 11) the distance learner reads each trial's pan where the
 # coder's reward peaked instead of its last pan (train.distance_readout=best_reward; parallax-eval
-# then reads the same pan). Since session 7 the random start ends after a
+# then reads the same pan), with the weighting's y = 1 (distance.y=1.0: with this readout the
+# best y on the online error before the perturbation; y = 0.1, the shipped default, was chosen
+# for the last pan). Since session 7 the random start ends after a
 # warm-up (train.start_jitter_presentations: 100 single, 50 for 5–10 cm, 33 for 5–20 cm), so the
 # last 100 trials before the perturbation, which Table 2 averages, start from pan 0 as the
 # paper's did; the 5–10 cm runs got 300 presentations so that their 150 before the perturbation
@@ -43,7 +45,7 @@ sweep="$(px_sweep_dir reproduce)"
 unweighted="$(px_sweep_dir reproduce_unweighted)"
 five_ten_c50="$(px_sweep_dir reproduce_5_10_c50)"
 seeds="seed=${SEEDS:-0,1,2}"
-read -ra improvements <<< "${IMPROVEMENTS-policy.feature_norm=difference env.initial_pan_jitter_deg=2 distance.lm.weight_decay=0.1 policy.eye_position_reference_m=0.5 policy.reward_change_gain=10 train.distance_readout=best_reward}"
+read -ra improvements <<< "${IMPROVEMENTS-policy.feature_norm=difference env.initial_pan_jitter_deg=2 distance.lm.weight_decay=0.1 policy.eye_position_reference_m=0.5 policy.reward_change_gain=10 train.distance_readout=best_reward distance.y=1.0}"
 if [[ -z "${IMPROVEMENTS+set}" ]]; then default_single_improvements="policy.reward_change_gain=30"; else default_single_improvements=""; fi
 read -ra single_improvements <<< "${SINGLE_IMPROVEMENTS-$default_single_improvements}"
 singles=paper_single_5,paper_single_7,paper_single_10,paper_single_13,paper_single_15,paper_single_20
