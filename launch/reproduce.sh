@@ -32,7 +32,8 @@
 # hold the warm-up and those 100 trials.
 # Extra arguments are Hydra overrides for every training job (they come last, so e.g.
 # train.presentations=2000 lengthens every run). Environment: launch/ablation_lib.sh, plus
-#   EVAL_ARGS      parallax-eval options (default: the grid 3.0, 3.5, …, 10.0 m, one held-out texture each)
+#   EVAL_ARGS      parallax-eval options (default: the grid 3.0, 3.5, …, 10.0 m, three held-out
+#                  textures each, as in the report since session 11)
 #   IMPROVEMENTS   the beyond-the-paper overrides above; IMPROVEMENTS=policy.reward_change_gain=0
 #                  runs the paper's algorithm with the shipped settings, as the reports of
 #                  sessions 2–4 did (the reward-change feature is on by default since session 9)
@@ -66,7 +67,7 @@ if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
   five_ten=("$sweep/<runs with experiment=paper_multi_5_10>")
 fi
 
-read -ra eval_args <<< "${EVAL_ARGS:---distances 3.0 3.5 4.0 4.5 5.0 5.5 6.0 6.5 7.0 7.5 8.0 8.5 9.0 9.5 10.0}"
+read -ra eval_args <<< "${EVAL_ARGS:---distances 3.0 3.5 4.0 4.5 5.0 5.5 6.0 6.5 7.0 7.5 8.0 8.5 9.0 9.5 10.0 --textures 3}"
 for run in "${weighted[@]}" "${five_ten[@]}"; do
   # evaluate finished runs whose eval.json is missing or older than the checkpoint
   if [[ -n "${PARALLAX_DRY_RUN:-}" || ( -f "$run/summary.json" && ! "$run/eval.json" -nt "$run/checkpoint.pt" ) ]]; then
