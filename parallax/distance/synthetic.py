@@ -19,8 +19,11 @@ PAPER_LATERAL_POSITIONS_M = [round(cm / 100.0, 2) for cm in range(5, 21)]
 
 
 def parallax_pans(lateral_positions_m: Sequence[float], distances_m: np.ndarray,
-                  noise_deg: float, rng: np.random.Generator) -> np.ndarray:
-    """(n, r) pans in degrees: atan(l_p/d) plus N(0, noise_deg) per entry."""
+                  noise_deg: "float | Sequence[float] | np.ndarray", rng: np.random.Generator) -> np.ndarray:
+    """(n, r) pans in degrees: atan(l_p/d) plus N(0, noise_deg) per entry.
+
+    ``noise_deg`` is one standard deviation for every position or one per position (r values).
+    """
     lateral = np.asarray(lateral_positions_m, dtype=np.float64)[None, :]
     distances = np.asarray(distances_m, dtype=np.float64)[:, None]
     if np.any(distances <= 0):
