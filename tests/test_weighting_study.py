@@ -1,5 +1,7 @@
 """The controlled test of the paper's input weighting (§3.5.1, eqs. 10–12) on geometric pans."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -48,9 +50,10 @@ def test_weighting_down_the_runaway_positions_helps_an_unregularised_learner():
 
 def test_same_seed_same_numbers():
     settings = StudySettings(stream=20, queue=20, weight_decay=0.0, test_repeats=1)
-    first = run_study(["uniform"], [1.0], [3], settings)
-    assert first == run_study(["uniform"], [1.0], [3], settings)
-    assert len(first) == 2 and all(np.isfinite(row["error_pct"]) for row in first)
+    first = run_study(["uniform"], [1.0], [3, 4], settings)
+    assert first == run_study(["uniform"], [1.0], [3, 4], settings)
+    assert first == run_study(["uniform"], [1.0], [3, 4], settings, jobs=2)  # worker processes, same rows
+    assert len(first) == 4 and all(np.isfinite(row["error_pct"]) for row in first)
 
 
 @pytest.mark.parametrize("args, named", [
@@ -64,3 +67,13 @@ def test_bad_settings_are_refused_with_the_value(args, named, capsys):
     assert main(args) == 2
     error = capsys.readouterr().err.strip()
     assert error.startswith("weighting_study: ") and named in error and "\n" not in error
+
+
+def test_the_command_prints_the_table_and_writes_the_json(tmp_path, capsys):
+    out = tmp_path / "study.json"
+    assert main(["--patterns", "uniform", "--y", "1", "--seeds", "2", "--stream", "20", "--queue", "20",
+                 "--json", str(out)]) == 0
+    assert "| uniform | y=1 |" in capsys.readouterr().out
+    payload = json.loads(out.read_text())
+    assert payload["settings"]["queue"] == 20 and len(payload["rows"]) == 4
+    assert {cell["weighting"] for cell in payload["summary"]} == {NO_WEIGHTING, "y=1"}

@@ -118,7 +118,6 @@ def learner_error(pattern: NoisePattern, y: float | None, seed: int,
 
 def _one(job: tuple[str, float | None, int, StudySettings]) -> dict[str, object]:
     name, y, seed, settings = job
-    torch.set_num_threads(1)  # one job per core; the fits are small
     return {"pattern": name, "weighting": NO_WEIGHTING if y is None else f"y={y:g}", "seed": seed,
             "error_pct": learner_error(NOISE_PATTERNS[name], y, seed, settings)}
 
@@ -139,7 +138,8 @@ def run_study(patterns: Sequence[str], ys: Sequence[float], seeds: Iterable[int]
     if jobs == 1:
         results = map(_one, work)
         return list(tqdm(results, total=len(work), disable=not progress, desc="learners"))
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    # One torch thread per worker: the jobs already fill the cores, and the fits are small.
+    with ProcessPoolExecutor(max_workers=jobs, initializer=torch.set_num_threads, initargs=(1,)) as pool:
         return list(tqdm(pool.map(_one, work), total=len(work), disable=not progress, desc="learners"))
 
 
