@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from parallax.distance.synthetic import PAPER_DISTANCES_M, PAPER_LATERAL_POSITIONS_M
+from parallax.distance.synthetic import PAPER_DISTANCES_M, PAPER_LATERAL_POSITIONS_M, parallax_pans
 from parallax.distance.weighting_study import (NOISE_PATTERNS, NO_WEIGHTING, StudySettings, main, markdown,
                                                noisy_pans, run_study, summarise)
 from parallax.distance.weighting import sensitive_positions
@@ -16,8 +16,7 @@ SENSITIVE = np.array(sensitive_positions(PAPER_LATERAL_POSITIONS_M))
 def _noise(name: str, n: int = 4000) -> np.ndarray:
     distances = np.random.default_rng(1).choice(PAPER_DISTANCES_M, size=n)
     pans = noisy_pans(NOISE_PATTERNS[name], distances, SENSITIVE, np.random.default_rng(2))
-    geometry = np.degrees(np.arctan(np.asarray(PAPER_LATERAL_POSITIONS_M)[None, :] / distances[:, None]))
-    return pans - geometry
+    return pans - parallax_pans(PAPER_LATERAL_POSITIONS_M, distances, 0.0, np.random.default_rng(0))
 
 
 def test_the_sensitive_positions_are_15_to_20_cm():

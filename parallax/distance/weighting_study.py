@@ -136,8 +136,7 @@ def run_study(patterns: Sequence[str], ys: Sequence[float], seeds: Iterable[int]
         raise ValueError(f"jobs must be at least 1, got {jobs!r}")
     work = [(name, y, int(seed), settings) for name in patterns for y in [None, *ys] for seed in seeds]
     if jobs == 1:
-        results = map(_one, work)
-        return list(tqdm(results, total=len(work), disable=not progress, desc="learners"))
+        return list(tqdm(map(_one, work), total=len(work), disable=not progress, desc="learners"))
     # One torch thread per worker: the jobs already fill the cores, and the fits are small.
     with ProcessPoolExecutor(max_workers=jobs, initializer=torch.set_num_threads, initargs=(1,)) as pool:
         return list(tqdm(pool.map(_one, work), total=len(work), disable=not progress, desc="learners"))
