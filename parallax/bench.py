@@ -7,7 +7,11 @@ Prints a readable table and writes JSON of
 - end-to-end environment steps per second (robot-iterations per second) for B = 1 and B = 16
   robots in lockstep, on the CPU (and CUDA when present);
 - the roofline of this machine for one step of the coder: its floating-point work and memory
-  traffic divided by the measured matmul throughput and memory bandwidth.
+  traffic divided by the measured matmul throughput and memory bandwidth;
+- where the whole step's time goes on the CPU: the process's CPU time per robot-iteration, how
+  many cores it kept busy, and the rate if every core were busy (what scheduling could give);
+- the step's ceiling on this machine: the coder at its roofline bound, every frame at the CPU
+  cost of a render measured alone, and every core busy — the most any schedule can give.
 
 Everything is measured in the same run, so ratios are comparable even on a shared machine;
 medians, never means. ``--threads`` sets torch's intra-op threads; the step also runs the world
@@ -18,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import time
@@ -133,6 +138,38 @@ def coder_bound_ms(work: dict[str, float], limits: dict[str, float], robots: int
     return max(flops / (limits["matmul_gflops"] * 1e9), bytes_moved / (limits["copy_gbps"] * 1e9)) * 1e3
 
 
+# --- the whole step's ceiling --------------------------------------------------------------------
+def usable_cores() -> int:
+    """CPU cores this process may run on (its affinity, which a cluster job may narrow)."""
+    return len(os.sched_getaffinity(0))
+
+
+def render_cpu_ms_per_frame(frames: int = 200) -> float:
+    """CPU milliseconds one 256×256 left-eye frame costs, rendered alone: the process's CPU time
+    (the GL thread, Mesa's rasteriser threads, everything) over ``frames`` frames, after a warm-up.
+    No roofline exists for the renderer, so this measured cost is the step's floor for it."""
+    import parallax.envs
+
+    env = parallax.envs.load(seed=0, lateral_positions=[0.05, 0.1], trial_length=30, image_size=256)
+    try:
+        env.reset()
+        for _ in range(20):
+            env.physics.render_left_eye()
+        start = time.process_time()
+        for _ in range(frames):
+            env.physics.render_left_eye()
+        return (time.process_time() - start) / frames * 1e3
+    finally:
+        env.close()
+
+
+def ceiling_steps_per_second(render_cpu_ms: float, coder_bound: float, robots: int, cores: int) -> float:
+    """Robot-iterations per second if the coder ran at its roofline bound (``coder_bound``, ms
+    for a lockstep of ``robots``), every frame cost ``render_cpu_ms`` of CPU and ``cores`` cores
+    were busy all the time, with nothing else to do: the most this machine can give."""
+    return cores * robots / (robots * render_cpu_ms + coder_bound) * 1e3
+
+
 # --- end to end ----------------------------------------------------------------------------------
 def end_to_end(robots: int, presentations: int, device: str, overrides: list[str]) -> dict[str, float]:
     """Robot-iterations per second of the whole loop, twice: the experiment's presentation alone
@@ -156,20 +193,29 @@ def end_to_end(robots: int, presentations: int, device: str, overrides: list[str
                                                lateral_positions_m=exp.lateral_positions)
             learner.observe_batch(pans, distances)  # the first, long fit happens here, untimed
             trainer.step_presentation(keep_view=False)  # warm-up: first calls allocate and compile
-            rates, step_ms, trainer_rates = [], [], []
+            rates, step_ms, trainer_rates, cpu_ms = [], [], [], []
             for _ in range(presentations):
-                t = time.perf_counter()
+                t, cpu = time.perf_counter(), time.process_time()
                 pres = exp.run_presentation()
-                dt = time.perf_counter() - t
+                dt, cpu = time.perf_counter() - t, time.process_time() - cpu
                 rates.append(pres.steps * robots / dt)
                 step_ms.append(dt / pres.steps * 1e3)
+                cpu_ms.append(cpu / (pres.steps * robots) * 1e3)
                 t = time.perf_counter()
                 pres, _ = trainer.step_presentation(keep_view=False)
                 trainer_rates.append(pres.steps * robots / (time.perf_counter() - t))
         finally:
             exp.close()
+    cores = usable_cores()
+    cpu_per_iteration = statistics.median(cpu_ms)
     return {"steps_per_second": statistics.median(rates), "lockstep_ms": statistics.median(step_ms),
-            "trainer_steps_per_second": statistics.median(trainer_rates)}
+            "steps_per_second_min": min(rates), "steps_per_second_max": max(rates),
+            "trainer_steps_per_second": statistics.median(trainer_rates),
+            # CPU time of every thread of the process (GL, Mesa's rasterisers, the coder's helper)
+            "cpu_ms_per_robot_iteration": cpu_per_iteration,
+            "busy_cores": statistics.median(steps * c / 1e3 for steps, c in zip(rates, cpu_ms)),
+            # the same work with every core busy all the time: what scheduling could still give
+            "steps_per_second_all_cores_busy": cores / cpu_per_iteration * 1e3}
 
 
 def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1, 16),
@@ -224,6 +270,13 @@ def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1,
         for b, r in by_b.items():
             r["coder_bound_ms"] = coder_bound_ms(work, report["roofline"][dev], int(b.split("=")[1]))
             r["step_over_coder_bound"] = r["lockstep_ms"] / r["coder_bound_ms"]
+    cores, render_ms = usable_cores(), render_cpu_ms_per_frame()
+    report["ceiling"] = {"cpu": {"cores": cores, "render_cpu_ms_per_frame": render_ms}}
+    for b, r in report["end_to_end"]["cpu"].items():
+        robots = int(b.split("=")[1])
+        ceiling = ceiling_steps_per_second(render_ms, r["coder_bound_ms"], robots, cores)
+        report["ceiling"]["cpu"][b] = {"steps_per_second": ceiling,
+                                       "measured_over_ceiling": r["steps_per_second"] / ceiling}
     return report
 
 
@@ -240,6 +293,13 @@ def format_report(report: dict) -> str:
             lines.append(f"  {dev} {b:<6} {r['steps_per_second']:>8.1f} steps/s   "
                          f"lockstep {r['lockstep_ms']:.2f} ms   ×{r['step_over_coder_bound']:.1f} of the coder bound   "
                          f"with the distance learner {r['trainer_steps_per_second']:.1f} steps/s")
+    for dev, by_b in report["end_to_end"].items():
+        for b, r in by_b.items():
+            if "cpu_ms_per_robot_iteration" in r:
+                lines.append(f"  {dev} {b:<6} range {r['steps_per_second_min']:.1f}–{r['steps_per_second_max']:.1f} steps/s;  "
+                             f"{r['cpu_ms_per_robot_iteration']:.2f} ms of CPU per robot-iteration, "
+                             f"{r['busy_cores']:.2f} cores busy → {r['steps_per_second_all_cores_busy']:.1f} "
+                             f"steps/s if all {usable_cores()} were")
     for dev, rf in report["roofline"].items():
         lines.append(f"[roofline {dev}] matmul {rf['matmul_gflops']:.1f} GFLOP/s, copy {rf['copy_gbps']:.1f} GB/s; "
                      f"coder per frame {rf['flops'] / 1e6:.1f} MFLOP, {rf['bytes'] / 1e6:.1f} MB "
@@ -255,6 +315,14 @@ def format_report(report: dict) -> str:
                if f"coder_B{b}_measured_over_bound" in rf]
         if gpu:
             lines.append(f"  coder measured / bound, by robots in the lockstep: {', '.join(gpu)}")
+    if "ceiling" in report:
+        top = report["ceiling"]["cpu"]
+        lines.append(f"[ceiling cpu] {top['cores']} cores; a left-eye frame costs {top['render_cpu_ms_per_frame']:.2f} ms "
+                     "of CPU to render alone; with the coder at its roofline bound and every core busy:")
+        for b, c in top.items():
+            if b.startswith("B="):
+                lines.append(f"  {b:<6} ≤ {c['steps_per_second']:.1f} robot-iterations/s "
+                             f"(measured: {c['measured_over_ceiling']:.0%} of it)")
     return "\n".join(lines)
 
 
