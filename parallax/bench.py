@@ -21,11 +21,13 @@ on the GL thread and the coder's second scale on a helper thread whatever it is 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import statistics
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
@@ -171,11 +173,16 @@ def ceiling_steps_per_second(render_cpu_ms: float, coder_bound: float, robots: i
 
 
 # --- end to end ----------------------------------------------------------------------------------
-def end_to_end(robots: int, presentations: int, device: str, overrides: list[str]) -> dict[str, float]:
-    """Robot-iterations per second of the whole loop, twice: the experiment's presentation alone
-    (render → retina → encode → policy → dictionary update) and the trainer's whole step, which
-    adds the distance learner's online prediction and fit (§3.5) and the metrics. The learner's
-    queue is filled with synthetic vectors first, so that every s triggers a fit of full size."""
+def end_to_end(robots: Sequence[int], presentations: int, device: str,
+               overrides: list[str]) -> dict[str, dict[str, float]]:
+    """Robot-iterations per second of the whole loop for each B in ``robots``, twice: the
+    experiment's presentation alone (render → retina → encode → policy → dictionary update) and
+    the trainer's whole step, which adds the distance learner's online prediction and fit (§3.5)
+    and the metrics. The learner's queue is filled with synthetic vectors first, so that every s
+    triggers a fit of full size.
+
+    The cases take turns, one presentation each per round, so that every B sees the same machine:
+    on a shared machine the speed moves by tens of per cent within minutes."""
     import tempfile
 
     import numpy as np
@@ -183,39 +190,46 @@ def end_to_end(robots: int, presentations: int, device: str, overrides: list[str
     from parallax.distance.synthetic import paper_regression
     from parallax.trainer import Trainer
 
-    cfg = compose([f"env.robots={robots}", f"device={device}", *overrides])
-    with tempfile.TemporaryDirectory() as run_dir:
-        trainer = Trainer(cfg, run_dir)
-        exp = trainer.exp
-        try:
-            learner = exp.distance
+    with contextlib.ExitStack() as stack:
+        trainers = {}
+        for b in robots:
+            trainer = Trainer(compose([f"env.robots={b}", f"device={device}", *overrides]),
+                              stack.enter_context(tempfile.TemporaryDirectory()))
+            stack.callback(trainer.exp.close)
+            learner = trainer.exp.distance
             pans, distances = paper_regression(learner.queue.capacity, np.random.default_rng(0),
-                                               lateral_positions_m=exp.lateral_positions)
+                                               lateral_positions_m=trainer.exp.lateral_positions)
             learner.observe_batch(pans, distances)  # the first, long fit happens here, untimed
             trainer.step_presentation(keep_view=False)  # warm-up: first calls allocate and compile
-            rates, step_ms, trainer_rates, cpu_ms = [], [], [], []
-            for _ in range(presentations):
+            trainers[b] = trainer
+        samples = {b: {"rates": [], "step_ms": [], "trainer_rates": [], "cpu_ms": []} for b in robots}
+        for _ in range(presentations):
+            for b, trainer in trainers.items():
+                timed = samples[b]
                 t, cpu = time.perf_counter(), time.process_time()
-                pres = exp.run_presentation()
+                pres = trainer.exp.run_presentation()
                 dt, cpu = time.perf_counter() - t, time.process_time() - cpu
-                rates.append(pres.steps * robots / dt)
-                step_ms.append(dt / pres.steps * 1e3)
-                cpu_ms.append(cpu / (pres.steps * robots) * 1e3)
+                timed["rates"].append(pres.steps * b / dt)
+                timed["step_ms"].append(dt / pres.steps * 1e3)
+                timed["cpu_ms"].append(cpu / (pres.steps * b) * 1e3)
                 t = time.perf_counter()
                 pres, _ = trainer.step_presentation(keep_view=False)
-                trainer_rates.append(pres.steps * robots / (time.perf_counter() - t))
-        finally:
-            exp.close()
+                timed["trainer_rates"].append(pres.steps * b / (time.perf_counter() - t))
     cores = usable_cores()
-    cpu_per_iteration = statistics.median(cpu_ms)
-    return {"steps_per_second": statistics.median(rates), "lockstep_ms": statistics.median(step_ms),
+    results = {}
+    for b, timed in samples.items():
+        rates, cpu_ms = timed["rates"], timed["cpu_ms"]
+        cpu_per_iteration = statistics.median(cpu_ms)
+        results[f"B={b}"] = {
+            "steps_per_second": statistics.median(rates), "lockstep_ms": statistics.median(timed["step_ms"]),
             "steps_per_second_min": min(rates), "steps_per_second_max": max(rates),
-            "trainer_steps_per_second": statistics.median(trainer_rates),
+            "trainer_steps_per_second": statistics.median(timed["trainer_rates"]),
             # CPU time of every thread of the process (GL, Mesa's rasterisers, the coder's helper)
             "cpu_ms_per_robot_iteration": cpu_per_iteration,
-            "busy_cores": statistics.median(steps * c / 1e3 for steps, c in zip(rates, cpu_ms)),
+            "busy_cores": statistics.median(rate * c / 1e3 for rate, c in zip(rates, cpu_ms)),
             # the same work with every core busy all the time: what scheduling could still give
             "steps_per_second_all_cores_busy": cores / cpu_per_iteration * 1e3}
+    return results
 
 
 def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1, 16),
@@ -242,7 +256,7 @@ def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1,
     overrides = ["curriculum=multi_5_10", f"train.threads={threads}"]
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     report["end_to_end"] = {
-        dev: {f"B={b}": end_to_end(b, presentations, dev, overrides) for b in robots} for dev in devices}
+        dev: end_to_end(robots, presentations, dev, overrides) for dev in devices}
     cfg = compose(overrides)
     work = coder_work_per_frame(cfg)
     report["roofline"] = {}
@@ -287,7 +301,7 @@ def format_report(report: dict) -> str:
         lines.append(f"[{group}]")
         for name, value in figures.items():
             lines.append(f"  {name:<48} {value:>10.3f}")
-    lines.append("[end to end] robot-iterations per second (median over presentations)")
+    lines.append("[end to end] robot-iterations per second (median over presentations; the cases take turns)")
     for dev, by_b in report["end_to_end"].items():
         for b, r in by_b.items():
             lines.append(f"  {dev} {b:<6} {r['steps_per_second']:>8.1f} steps/s   "
@@ -339,7 +353,8 @@ def main(argv: list[str] | None = None) -> None:
         print("parallax-bench: error: --repeats, --presentations, --robots and --threads must be ≥ 1",
               file=sys.stderr)
         sys.exit(2)
-    report = run(args.repeats, args.presentations, tuple(args.robots), args.threads, not args.no_components)
+    robots = tuple(dict.fromkeys(args.robots))  # each B once, in the order given
+    report = run(args.repeats, args.presentations, robots, args.threads, not args.no_components)
     print(format_report(report))
     text = json.dumps(report, indent=2)
     if args.json:

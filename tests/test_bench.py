@@ -41,11 +41,14 @@ def test_ceiling_is_every_core_busy_with_the_coder_at_its_bound():
 
 def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
     out = tmp_path / "bench.json"
-    bench.main(["--no-components", "--robots", "1", "--presentations", "1", "--json", str(out)])
+    bench.main(["--no-components", "--robots", "1", "2", "1", "--presentations", "1", "--json", str(out)])
     printed = capsys.readouterr().out
     assert "[end to end]" in printed and "[roofline cpu]" in printed
     report = json.loads(out.read_text())
+    # each B once, however often it was asked for; the cases take turns in one process
+    assert list(report["end_to_end"]["cpu"]) == ["B=1", "B=2"]
     assert report["end_to_end"]["cpu"]["B=1"]["steps_per_second"] > 0
+    assert report["end_to_end"]["cpu"]["B=2"]["steps_per_second"] > 0
     # the trainer's whole step, with the distance learner fitting a full queue at every s
     assert report["end_to_end"]["cpu"]["B=1"]["trainer_steps_per_second"] > 0
     cpu = report["roofline"]["cpu"]
