@@ -17,6 +17,7 @@ from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any
 
+import cv2
 import numpy as np
 import torch
 from hydra.utils import instantiate
@@ -70,6 +71,12 @@ class Experiment:
         self.device = torch.device(cfg.device)
         if self.device.type == "cuda" and not torch.cuda.is_available():
             raise RuntimeError("device=cuda was asked for but torch sees no CUDA device; use device=cpu")
+        # OpenCV's calls in a step (the retina's cvtColor and pyrDown, the §5 blur) take tens of
+        # µs on images this small, and between them its worker thread spun: 0.8–0.9 ms of CPU per
+        # step at B = 1 (per-thread CPU times, two runs each way), taken from the threads that
+        # render and encode. Without workers the calls run here; their results are the same
+        # (tests/test_coding_retina.py).
+        cv2.setNumThreads(0)
         self.lateral_positions = [float(l) for l in cfg.curriculum.lateral_positions]
         stages = cfg.curriculum.get("stages") or [self.lateral_positions]
         self.stages = [[float(l) for l in stage] for stage in stages]

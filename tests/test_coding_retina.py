@@ -54,6 +54,24 @@ def test_three_levels_match_repeated_opencv_on_a_photograph() -> None:
         np.testing.assert_allclose(ours[1], pyramid_down_torch(batch[1:], 3)[0].numpy(), atol=1e-4)
 
 
+def test_opencv_without_worker_threads_gives_the_same_patches() -> None:
+    # parallax.experiment.Experiment turns OpenCV's worker threads off; the retina must not change
+    rgb = _random_images(2)
+    previous = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(max(2, previous))
+        threaded = [scale_patches(as_gray_batch(rgb), spec) for spec in (COARSE, FINE)]
+        blurred_threaded = cv2.GaussianBlur(rgb[0], (0, 0), sigmaX=2.0, borderType=cv2.BORDER_REFLECT_101)
+        cv2.setNumThreads(0)
+        alone = [scale_patches(as_gray_batch(rgb), spec) for spec in (COARSE, FINE)]
+        blurred_alone = cv2.GaussianBlur(rgb[0], (0, 0), sigmaX=2.0, borderType=cv2.BORDER_REFLECT_101)
+    finally:
+        cv2.setNumThreads(previous)
+    for a, b in zip(threaded, alone):
+        assert torch.equal(a, b)
+    assert np.array_equal(blurred_threaded, blurred_alone)
+
+
 def test_grayscale_matches_opencv_and_accepts_every_input_form() -> None:
     rgb = _random_images(2, size=40)
     expected = np.stack([cv2.cvtColor(image.astype(np.float32), cv2.COLOR_RGB2GRAY) for image in rgb])
