@@ -13,7 +13,7 @@ presentations; `parallax.trainer` adds the schedule, metrics, logging and checkp
 
 from __future__ import annotations
 
-from concurrent.futures import Future
+from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -65,6 +65,11 @@ class Experiment:
     #: was fastest at B = 16 on 2 cores (about 260 robot-iterations/s, against 204 for one chunk
     #: of 16 and 239 for chunks of 1: small chunks overlap more with rendering but cost more calls).
     ENCODE_CHUNK = 4
+    #: Start each iteration's dictionary step on the coder's helper thread as soon as its frames
+    #: are encoded, so that it runs during the policy's turn (when only this thread works) and
+    #: the render; False: on this thread once the actions are sent. Same numbers either way
+    #: (tests/test_experiment.py); it takes 1.4–2.3 ms of CPU per step off this thread at B = 1.
+    EARLY_DICTIONARY_STEP = True
 
     def __init__(self, cfg: DictConfig, stimuli_split: str | None = None):
         self.cfg = cfg
@@ -167,8 +172,9 @@ class Experiment:
         """All robots live through one presentation; learning on or frozen.
 
         The worlds step on the GL thread (:func:`parallax.envs.gl_thread`) while this thread
-        works: the dictionary step of iteration t runs while the frames of t + 1 render, and the
-        robots' frames are encoded chunk by chunk as they arrive. Every value is computed as in
+        works: the dictionary step of iteration t runs on the coder's helper thread while the
+        policy learns and acts and the frames of t + 1 render, and the robots' frames are encoded
+        chunk by chunk as they arrive. Every value is computed as in
         the plain sequence render → encode → policy → dictionary step, in the same order per
         robot and per dictionary, so the results do not depend on it (tests/test_experiment;
         with one torch thread, ``train.threads=1``, the default: with more, the matrix library
@@ -192,51 +198,66 @@ class Experiment:
         reward_sum, error_sums, n_enc = 0.0, {}, 0
         stat_sums: dict[str, float] = {}
         n_updates = steps = 0
-        while True:
-            iteration = int(obs[0]["iteration"])
-            if self.uses_reference_states and iteration == 0:
-                # once per trial, with the dictionaries this step's frames were encoded with
-                reference_state = self.reference_states(self._images(obs, "reference"))
-            out = encodings[0].output if len(encodings) == 1 else CoderOutput.join(
-                [encoding.output for encoding in encodings])
-            reward_sum += float(out.reward.mean())
-            for scale, e in out.errors.items():
-                error_sums[scale] = error_sums.get(scale, 0.0) + float(e.mean())
-            n_enc += 1
-            p = int(obs[0]["position_index"])
-            current_pans = np.array([float(o["pan"]) for o in obs])
-            if iteration == 0:
-                start_pans[:, p] = current_pans
-            rewards = out.reward.cpu().numpy().astype(np.float64)
-            better = rewards > best_rewards[:, p]      # ties keep the earlier pan
-            best_rewards[better, p] = rewards[better]
-            best_pans[better, p] = current_pans[better]
-            # the last step's reward change, within the trial only (none at its first iteration)
-            change = None if iteration == 0 else (rewards, prev_rewards, prev_increments)
-            state = self.policy_state(out.state, reference_state, current_pans, lateral[p], change)
-            # Robots move in lockstep, so they cross a trial boundary together; the transition into
-            # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
-            if learn and prev_state is not None and iteration > 0:
-                stats = self.policy.update(prev_state, prev_action, out.reward, state, valid)
-                for k, v in stats.items():
-                    stat_sums[k] = stat_sums.get(k, 0.0) + float(v)
-                n_updates += 1
-            if iteration == t_h - 1:
-                pans[:, p] = current_pans
-                targets[:, p] = [float(o["target_pan"]) for o in obs]
-            if timesteps[0].last():
-                if learn_dictionaries:
-                    self.coder.learn_from(encodings)
-                break
-            action = self.policy.act(state, greedy=greedy)
-            increments = self.policy.action_values[action].cpu().numpy()
-            futures = [world.submit(env.step, float(a)) for env, a in zip(self.envs, increments)]
-            if learn_dictionaries:
-                self.coder.learn_from(encodings)   # while the next frames render
-            timesteps, encodings = self._gather(futures)
-            obs = [ts.observation for ts in timesteps]
-            prev_state, prev_action, prev_rewards, prev_increments = state, action, rewards, increments
-            steps += 1
+        learning: Future | None = None   # a dictionary step running on the coder's helper thread
+        try:
+            while True:
+                iteration = int(obs[0]["iteration"])
+                if self.uses_reference_states and iteration == 0:
+                    # once per trial, with the dictionaries this step's frames were encoded with
+                    reference_state = self.reference_states(self._images(obs, "reference"))
+                if learn_dictionaries and self.EARLY_DICTIONARY_STEP:
+                    # this iteration's dictionary step, on the coder's helper thread while the policy
+                    # learns and acts (the world and the helper would otherwise wait) and the world
+                    # renders; waited for before anything reads the dictionaries again
+                    learning = self.coder.learn_from_async(encodings)
+                out = encodings[0].output if len(encodings) == 1 else CoderOutput.join(
+                    [encoding.output for encoding in encodings])
+                reward_sum += float(out.reward.mean())
+                for scale, e in out.errors.items():
+                    error_sums[scale] = error_sums.get(scale, 0.0) + float(e.mean())
+                n_enc += 1
+                p = int(obs[0]["position_index"])
+                current_pans = np.array([float(o["pan"]) for o in obs])
+                if iteration == 0:
+                    start_pans[:, p] = current_pans
+                rewards = out.reward.cpu().numpy().astype(np.float64)
+                better = rewards > best_rewards[:, p]      # ties keep the earlier pan
+                best_rewards[better, p] = rewards[better]
+                best_pans[better, p] = current_pans[better]
+                # the last step's reward change, within the trial only (none at its first iteration)
+                change = None if iteration == 0 else (rewards, prev_rewards, prev_increments)
+                state = self.policy_state(out.state, reference_state, current_pans, lateral[p], change)
+                # Robots move in lockstep, so they cross a trial boundary together; the transition into
+                # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
+                if learn and prev_state is not None and iteration > 0:
+                    stats = self.policy.update(prev_state, prev_action, out.reward, state, valid)
+                    for k, v in stats.items():
+                        stat_sums[k] = stat_sums.get(k, 0.0) + float(v)
+                    n_updates += 1
+                if iteration == t_h - 1:
+                    pans[:, p] = current_pans
+                    targets[:, p] = [float(o["target_pan"]) for o in obs]
+                if timesteps[0].last():
+                    if learning is not None:
+                        learning.result()
+                    elif learn_dictionaries:
+                        self.coder.learn_from(encodings)
+                    break
+                action = self.policy.act(state, greedy=greedy)
+                increments = self.policy.action_values[action].cpu().numpy()
+                futures = [world.submit(env.step, float(a)) for env, a in zip(self.envs, increments)]
+                if learning is not None:
+                    learning.result()   # the next frames are encoded with the new dictionaries
+                    learning = None
+                elif learn_dictionaries:
+                    self.coder.learn_from(encodings)   # while the next frames render
+                timesteps, encodings = self._gather(futures)
+                obs = [ts.observation for ts in timesteps]
+                prev_state, prev_action, prev_rewards, prev_increments = state, action, rewards, increments
+                steps += 1
+        finally:
+            if learning is not None:
+                wait([learning])   # never leave a dictionary step running behind an error
 
         view = None
         if keep_view:

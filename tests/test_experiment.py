@@ -13,17 +13,18 @@ from parallax.config import compose
 from parallax.experiment import Experiment
 
 
-def _presentations(overrides: list[str], chunk: int, count: int = 2):
-    """``count`` presentations of a fresh experiment encoding ``chunk`` robots at a time, and the
-    state of its coder and policy afterwards."""
-    previous = Experiment.ENCODE_CHUNK
-    Experiment.ENCODE_CHUNK = chunk
+def _presentations(overrides: list[str], chunk: int, count: int = 2, early_dictionary_step: bool = True):
+    """``count`` presentations of a fresh experiment encoding ``chunk`` robots at a time (its
+    dictionary steps on the helper thread from the policy's turn on, or on the caller's while the
+    world renders), and the state of its coder and policy afterwards."""
+    previous = Experiment.ENCODE_CHUNK, Experiment.EARLY_DICTIONARY_STEP
+    Experiment.ENCODE_CHUNK, Experiment.EARLY_DICTIONARY_STEP = chunk, early_dictionary_step
     exp = Experiment(compose(overrides))
     try:
         presentations = [exp.run_presentation() for _ in range(count)]
         return presentations, exp.coder.state_dict(), exp.policy.state_dict()
     finally:
-        Experiment.ENCODE_CHUNK = previous
+        Experiment.ENCODE_CHUNK, Experiment.EARLY_DICTIONARY_STEP = previous
         exp.close()
 
 
@@ -46,6 +47,37 @@ def test_robots_encoded_chunk_by_chunk_give_the_numbers_of_one_batch(tiny_overri
     one_batch = _presentations(overrides, chunk=3)
     _assert_same(_presentations(overrides, chunk=1), one_batch)
     _assert_same(_presentations(overrides, chunk=2), one_batch)   # chunks of 2 and 1
+
+
+@pytest.mark.parametrize(("robots", "extra"), [(1, []), (3, ["policy.feature_norm=difference"])])
+def test_the_dictionary_step_on_the_helper_thread_changes_no_number(tiny_overrides, robots, extra) -> None:
+    overrides = tiny_overrides + [f"env.robots={robots}", "env.initial_pan_jitter_deg=1", *extra]
+    on_the_caller = _presentations(overrides, chunk=2, early_dictionary_step=False)
+    _assert_same(_presentations(overrides, chunk=2, early_dictionary_step=True), on_the_caller)
+
+
+def test_an_error_during_the_step_waits_for_the_dictionary_step(tiny_overrides, monkeypatch) -> None:
+    exp = Experiment(compose(tiny_overrides))
+    try:
+        steps = []
+        slow_learn = exp.coder.learn_from
+
+        def learn_slowly(encodings) -> None:
+            threading.Event().wait(0.2)
+            slow_learn(encodings)
+            steps.append("learnt")
+
+        def failing_act(*_args, **_kwargs):
+            raise RuntimeError("policy failed")
+
+        monkeypatch.setattr(exp.coder, "learn_from", learn_slowly)
+        monkeypatch.setattr(exp.policy, "act", failing_act)
+        with pytest.raises(RuntimeError, match="policy failed"):
+            exp.run_presentation()
+        # the error came out only after the dictionary step it overlapped had finished
+        assert steps == ["learnt"]
+    finally:
+        exp.close()
 
 
 def test_the_coder_learns_from_chunks_as_from_their_batch(tiny_overrides) -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import os
 import zlib
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
@@ -65,6 +65,20 @@ def _scale_helper() -> ThreadPoolExecutor:
     if _helper is None or _helper_pid != os.getpid():
         _helper, _helper_pid = ThreadPoolExecutor(1, thread_name_prefix="parallax-scale"), os.getpid()
     return _helper
+
+
+def _on_helper(work: Callable[..., Any], *arguments: Any) -> Future:
+    """``work(*arguments)`` on the helper thread, with the caller's torch thread count: it is per
+    thread under OpenMP, and with the caller's the helper's reductions and products add up as the
+    caller's would."""
+    threads = torch.get_num_threads()
+
+    def run() -> Any:
+        if torch.get_num_threads() != threads:
+            torch.set_num_threads(threads)
+        return work(*arguments)
+
+    return _scale_helper().submit(run)
 
 
 def scale_seed(seed: int, scale: str) -> int:
@@ -175,12 +189,26 @@ class MultiScaleCoder(nn.Module):
         """One dictionary step per scale from an encoding, or from the encodings of consecutive
         chunks of robots in robot order (exactly the step of their joint encoding)."""
         chunks = [encodings] if isinstance(encodings, Encoding) else list(encodings)
-        # One scale after the other: in a lockstep this runs while the world renders, and with a
-        # second thread here the whole step was slower, probably because it took the core the
-        # renderer needed (B = 1: 157–166 against 166–176 robot-iterations/s in alternating runs;
-        # B = 16 the same).
+        # One scale after the other: in a lockstep this runs (on the helper thread, see
+        # learn_from_async) while the policy acts and the world renders, and with the two scales
+        # on two threads the whole step was slower, probably because it took the core the
+        # renderer needed (session 8, B = 1: 157–166 against 166–176 robot-iterations/s in
+        # alternating runs; B = 16 the same).
         for name in self.scales:
             self.coders[name].learn_from([chunk.codes[name] for chunk in chunks])
+
+    def learn_from_async(self, encodings: Encoding | Sequence[Encoding]) -> Future:
+        """:meth:`learn_from` on the helper thread (CPU; elsewhere at once), as a future.
+
+        The caller must wait for it before it encodes again or reads the dictionaries. In a
+        lockstep it runs while the policy learns and acts, when no other thread works: the
+        world waits for the actions and the helper for the next frames."""
+        if self.device.type != "cpu" or not self.parallel_scales:
+            done: Future = Future()
+            self.learn_from(encodings)
+            done.set_result(None)
+            return done
+        return _on_helper(self.learn_from, encodings)
 
     def _each_scale(self, work: Callable[[str], Any]) -> dict[str, Any]:
         """``work(scale)`` for every scale, the first on this thread and the others on a helper
@@ -189,16 +217,7 @@ class MultiScaleCoder(nn.Module):
         the coarse (at B = 1 the world waits for the encoding, so that core is free)."""
         if len(self.scales) == 1 or self.device.type != "cpu" or not self.parallel_scales:
             return {name: work(name) for name in self.scales}
-        threads = torch.get_num_threads()
-
-        def on_helper(name: str) -> Any:
-            # torch's thread count is per thread under OpenMP: the helper takes the caller's, so
-            # that its reductions and products add up as the caller's would.
-            if torch.get_num_threads() != threads:
-                torch.set_num_threads(threads)
-            return work(name)
-
-        others = {name: _scale_helper().submit(on_helper, name) for name in self.scales[1:]}
+        others = {name: _on_helper(work, name) for name in self.scales[1:]}
         first = {self.scales[0]: work(self.scales[0])}
         return {**first, **{name: future.result() for name, future in others.items()}}
 
