@@ -226,7 +226,7 @@ def end_to_end(robots: Sequence[int], presentations: int, device: str,
             "trainer_steps_per_second": statistics.median(timed["trainer_rates"]),
             # CPU time of every thread of the process (GL, Mesa's rasterisers, the coder's helper)
             "cpu_ms_per_robot_iteration": cpu_per_iteration,
-            "busy_cores": statistics.median(rate * c / 1e3 for rate, c in zip(rates, cpu_ms)),
+            "busy_cores": statistics.median(rate * c / 1e3 for rate, c in zip(rates, cpu_ms)), "cores": cores,
             # the same work with every core busy all the time: what scheduling could still give
             "steps_per_second_all_cores_busy": cores / cpu_per_iteration * 1e3}
     return results
@@ -287,8 +287,7 @@ def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1,
     cores, render_ms = usable_cores(), render_cpu_ms_per_frame()
     report["ceiling"] = {"cpu": {"cores": cores, "render_cpu_ms_per_frame": render_ms}}
     for b, r in report["end_to_end"]["cpu"].items():
-        robots = int(b.split("=")[1])
-        ceiling = ceiling_steps_per_second(render_ms, r["coder_bound_ms"], robots, cores)
+        ceiling = ceiling_steps_per_second(render_ms, r["coder_bound_ms"], int(b.split("=")[1]), cores)
         report["ceiling"]["cpu"][b] = {"steps_per_second": ceiling,
                                        "measured_over_ceiling": r["steps_per_second"] / ceiling}
     return report
@@ -313,7 +312,7 @@ def format_report(report: dict) -> str:
                 lines.append(f"  {dev} {b:<6} range {r['steps_per_second_min']:.1f}–{r['steps_per_second_max']:.1f} steps/s;  "
                              f"{r['cpu_ms_per_robot_iteration']:.2f} ms of CPU per robot-iteration, "
                              f"{r['busy_cores']:.2f} cores busy → {r['steps_per_second_all_cores_busy']:.1f} "
-                             f"steps/s if all {usable_cores()} were")
+                             f"steps/s if all {r['cores']} were")
     for dev, rf in report["roofline"].items():
         lines.append(f"[roofline {dev}] matmul {rf['matmul_gflops']:.1f} GFLOP/s, copy {rf['copy_gbps']:.1f} GB/s; "
                      f"coder per frame {rf['flops'] / 1e6:.1f} MFLOP, {rf['bytes'] / 1e6:.1f} MB "

@@ -172,9 +172,9 @@ class Experiment:
         """All robots live through one presentation; learning on or frozen.
 
         The worlds step on the GL thread (:func:`parallax.envs.gl_thread`) while this thread
-        works: the dictionary step of iteration t runs on the coder's helper thread while the
-        policy learns and acts and the frames of t + 1 render, and the robots' frames are encoded
-        chunk by chunk as they arrive. Every value is computed as in
+        works: the dictionary step of iteration t runs on the coder's helper thread (CPU) while
+        the policy learns and acts and the frames of t + 1 render, and the robots' frames are
+        encoded chunk by chunk as they arrive. Every value is computed as in
         the plain sequence render → encode → policy → dictionary step, in the same order per
         robot and per dictionary, so the results do not depend on it (tests/test_experiment;
         with one torch thread, ``train.threads=1``, the default: with more, the matrix library
