@@ -199,6 +199,16 @@ class Experiment:
         stat_sums: dict[str, float] = {}
         n_updates = steps = 0
         learning: Future | None = None   # a dictionary step running on the coder's helper thread
+
+        def finish_dictionary_step() -> None:
+            """This iteration's dictionary step done: waited for, or taken now on this thread."""
+            nonlocal learning
+            if learning is not None:
+                learning.result()
+                learning = None
+            elif learn_dictionaries:
+                self.coder.learn_from(encodings)
+
         try:
             while True:
                 iteration = int(obs[0]["iteration"])
@@ -238,19 +248,12 @@ class Experiment:
                     pans[:, p] = current_pans
                     targets[:, p] = [float(o["target_pan"]) for o in obs]
                 if timesteps[0].last():
-                    if learning is not None:
-                        learning.result()
-                    elif learn_dictionaries:
-                        self.coder.learn_from(encodings)
+                    finish_dictionary_step()
                     break
                 action = self.policy.act(state, greedy=greedy)
                 increments = self.policy.action_values[action].cpu().numpy()
                 futures = [world.submit(env.step, float(a)) for env, a in zip(self.envs, increments)]
-                if learning is not None:
-                    learning.result()   # the next frames are encoded with the new dictionaries
-                    learning = None
-                elif learn_dictionaries:
-                    self.coder.learn_from(encodings)   # while the next frames render
+                finish_dictionary_step()   # while the next frames render; they are encoded with it
                 timesteps, encodings = self._gather(futures)
                 obs = [ts.observation for ts in timesteps]
                 prev_state, prev_action, prev_rewards, prev_increments = state, action, rewards, increments
