@@ -39,28 +39,36 @@ def target_pans(lateral_m: float, distances: list[float]) -> np.ndarray:
         env.close()
 
 
-def constant_pan_baselines(laterals_m: list[float], distances: list[float] | None = None) -> dict[str, dict[str, float]]:
+def constant_pan_baselines(
+    laterals_m: list[float], distances: list[float] | None = None
+) -> dict[str, dict[str, float]]:
     """Per lateral position (label in cm): MAE of pan 0 and of the best constant pan, degrees."""
     distances = distances or grid(3.0, 10.0, 0.1)
     out = {}
     for lateral in laterals_m:
         alpha = target_pans(lateral, distances)
         best = float(np.median(alpha))
-        out[f"{lateral * 100:g}"] = {"pan_zero": float(np.abs(alpha).mean()),
-                                      "best_constant": float(np.abs(alpha - best).mean()),
-                                      "best_constant_pan": best}
+        out[f"{lateral * 100:g}"] = {
+            "pan_zero": float(np.abs(alpha).mean()),
+            "best_constant": float(np.abs(alpha - best).mean()),
+            "best_constant_pan": best,
+        }
     return out
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m parallax.baselines", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.baselines", description=__doc__.split("\n\n")[0]
+    )
     parser.add_argument("--lateral-cm", type=float, nargs="+", default=[5, 7, 10, 13, 15, 20])
     args = parser.parse_args(argv)
     baselines = constant_pan_baselines([l / 100 for l in args.lateral_cm])
     print("| L (cm) | MAE, pan stays 0 (deg) | MAE, best constant pan (deg) | that pan (deg) |")
     print("|---|---|---|---|")
     for label, b in baselines.items():
-        print(f"| {label} | {b['pan_zero']:.3f} | {b['best_constant']:.3f} | {b['best_constant_pan']:.3f} |")
+        print(
+            f"| {label} | {b['pan_zero']:.3f} | {b['best_constant']:.3f} | {b['best_constant_pan']:.3f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -57,9 +57,9 @@ def machine_limits(threads: int, device: str = "cpu") -> dict[str, float]:
         out = torch.empty(n, n, device=device)
         mm = _synchronised(lambda: torch.mm(a, b, out=out), device)
         ms = interleaved_medians_ms({"mm": mm}, repeats=20)["mm"]
-        gflops = 2 * n ** 3 / (ms * 1e-3) / 1e9
+        gflops = 2 * n**3 / (ms * 1e-3) / 1e9
         # 128 MiB on the CPU, 2 GiB on a GPU: far beyond the caches
-        src = torch.ones((32 if device == "cpu" else 512) * 2 ** 20, device=device)
+        src = torch.ones((32 if device == "cpu" else 512) * 2**20, device=device)
         dst = torch.empty_like(src)
         copy = _synchronised(lambda: dst.copy_(src), device)
         ms = interleaved_medians_ms({"copy": copy}, repeats=10)["copy"]
@@ -85,7 +85,8 @@ def cuda_components(repeats: int) -> dict[str, float]:
         coder.set_reference(references)
         current = torch.from_numpy(currents).to("cuda")
         operations[f"encode_update_both_B{batch}_ms"] = _synchronised(
-            lambda coder=coder, current=current: coder(current), "cuda")
+            lambda coder=coder, current=current: coder(current), "cuda"
+        )
     for batch in (1, 16, 64):
         policy = NaturalActorCritic(STATE_DIM, NUM_SCALES, seed=0).to("cuda")
         generator = torch.Generator().manual_seed(0)
@@ -96,6 +97,7 @@ def cuda_components(repeats: int) -> dict[str, float]:
         def act_update(policy=policy, states=states, rewards=rewards, valid=valid) -> None:
             action = policy.act(states)
             policy.update(states, action, rewards, states, valid)
+
         operations[f"policy_act_update_B{batch}_ms"] = _synchronised(act_update, "cuda")
     timed = EpochFromStart(_paper_sized_learner().to("cuda"))
     operations["lm_epoch_ms"] = _synchronised(lambda: (timed.restore(), timed.epoch()), "cuda")
@@ -128,7 +130,12 @@ def coder_work_per_frame(cfg) -> dict[str, float]:
         bytes_moved += 4 * (3 * P * K + 3 * N * K + N * N + 2 * (k + 1) * P * N)
         shared_flops += 2 * N * N * K
         shared_bytes += 4 * (3 * N * K + N * N)
-    return {"flops": flops, "bytes": bytes_moved, "shared_flops": shared_flops, "shared_bytes": shared_bytes}
+    return {
+        "flops": flops,
+        "bytes": bytes_moved,
+        "shared_flops": shared_flops,
+        "shared_bytes": shared_bytes,
+    }
 
 
 def coder_bound_ms(work: dict[str, float], limits: dict[str, float], robots: int) -> float:
@@ -137,7 +144,10 @@ def coder_bound_ms(work: dict[str, float], limits: dict[str, float], robots: int
     The Gram matrix and the dictionary reads are counted once per lockstep, not per robot."""
     flops = robots * (work["flops"] - work["shared_flops"]) + work["shared_flops"]
     bytes_moved = robots * (work["bytes"] - work["shared_bytes"]) + work["shared_bytes"]
-    return max(flops / (limits["matmul_gflops"] * 1e9), bytes_moved / (limits["copy_gbps"] * 1e9)) * 1e3
+    return (
+        max(flops / (limits["matmul_gflops"] * 1e9), bytes_moved / (limits["copy_gbps"] * 1e9))
+        * 1e3
+    )
 
 
 # --- the whole step's ceiling --------------------------------------------------------------------
@@ -165,7 +175,9 @@ def render_cpu_ms_per_frame(frames: int = 200) -> float:
         env.close()
 
 
-def ceiling_steps_per_second(render_cpu_ms: float, coder_bound: float, robots: int, cores: int) -> float:
+def ceiling_steps_per_second(
+    render_cpu_ms: float, coder_bound: float, robots: int, cores: int
+) -> float:
     """Robot-iterations per second if the coder ran at its roofline bound (``coder_bound``, ms
     for a lockstep of ``robots``), every frame cost ``render_cpu_ms`` of CPU and ``cores`` cores
     were busy all the time, with nothing else to do: the most this machine can give."""
@@ -173,8 +185,9 @@ def ceiling_steps_per_second(render_cpu_ms: float, coder_bound: float, robots: i
 
 
 # --- end to end ----------------------------------------------------------------------------------
-def end_to_end(robots: Sequence[int], presentations: int, device: str,
-               overrides: list[str]) -> dict[str, dict[str, float]]:
+def end_to_end(
+    robots: Sequence[int], presentations: int, device: str, overrides: list[str]
+) -> dict[str, dict[str, float]]:
     """Robot-iterations per second of the whole loop for each B in ``robots``, twice: the
     experiment's presentation alone (render → retina → encode → policy → dictionary update) and
     the trainer's whole step, which adds the distance learner's online prediction and fit (§3.5)
@@ -193,16 +206,23 @@ def end_to_end(robots: Sequence[int], presentations: int, device: str,
     with contextlib.ExitStack() as stack:
         trainers = {}
         for b in robots:
-            trainer = Trainer(compose([f"env.robots={b}", f"device={device}", *overrides]),
-                              stack.enter_context(tempfile.TemporaryDirectory()))
+            trainer = Trainer(
+                compose([f"env.robots={b}", f"device={device}", *overrides]),
+                stack.enter_context(tempfile.TemporaryDirectory()),
+            )
             stack.callback(trainer.exp.close)
             learner = trainer.exp.distance
-            pans, distances = paper_regression(learner.queue.capacity, np.random.default_rng(0),
-                                               lateral_positions_m=trainer.exp.lateral_positions)
+            pans, distances = paper_regression(
+                learner.queue.capacity,
+                np.random.default_rng(0),
+                lateral_positions_m=trainer.exp.lateral_positions,
+            )
             learner.observe_batch(pans, distances)  # the first, long fit happens here, untimed
             trainer.step_presentation(keep_view=False)  # warm-up: first calls allocate and compile
             trainers[b] = trainer
-        samples = {b: {"rates": [], "step_ms": [], "trainer_rates": [], "cpu_ms": []} for b in robots}
+        samples = {
+            b: {"rates": [], "step_ms": [], "trainer_rates": [], "cpu_ms": []} for b in robots
+        }
         for _ in range(presentations):
             for b, trainer in trainers.items():
                 timed = samples[b]
@@ -221,22 +241,34 @@ def end_to_end(robots: Sequence[int], presentations: int, device: str,
         rates, cpu_ms = timed["rates"], timed["cpu_ms"]
         cpu_per_iteration = statistics.median(cpu_ms)
         results[f"B={b}"] = {
-            "steps_per_second": statistics.median(rates), "lockstep_ms": statistics.median(timed["step_ms"]),
-            "steps_per_second_min": min(rates), "steps_per_second_max": max(rates),
+            "steps_per_second": statistics.median(rates),
+            "lockstep_ms": statistics.median(timed["step_ms"]),
+            "steps_per_second_min": min(rates),
+            "steps_per_second_max": max(rates),
             "trainer_steps_per_second": statistics.median(timed["trainer_rates"]),
             # CPU time of every thread of the process (GL, Mesa's rasterisers, the coder's helper)
             "cpu_ms_per_robot_iteration": cpu_per_iteration,
-            "busy_cores": statistics.median(rate * c / 1e3 for rate, c in zip(rates, cpu_ms)), "cores": cores,
+            "busy_cores": statistics.median(rate * c / 1e3 for rate, c in zip(rates, cpu_ms)),
+            "cores": cores,
             # the same work with every core busy all the time: what scheduling could still give
-            "steps_per_second_all_cores_busy": cores / cpu_per_iteration * 1e3}
+            "steps_per_second_all_cores_busy": cores / cpu_per_iteration * 1e3,
+        }
     return results
 
 
-def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1, 16),
-        threads: int = 1, components: bool = True) -> dict:
+def run(
+    repeats: int = 30,
+    presentations: int = 3,
+    robots: tuple[int, ...] = (1, 16),
+    threads: int = 1,
+    components: bool = True,
+) -> dict:
     torch.set_num_threads(threads)
-    report: dict = {"threads": threads, "torch": torch.__version__,
-                    "cuda": torch.cuda.is_available()}
+    report: dict = {
+        "threads": threads,
+        "torch": torch.__version__,
+        "cuda": torch.cuda.is_available(),
+    }
     if components:
         from parallax.coding import benchmark as coding_bench
         from parallax.distance import benchmark as distance_bench
@@ -256,101 +288,147 @@ def run(repeats: int = 30, presentations: int = 3, robots: tuple[int, ...] = (1,
     overrides = ["curriculum=multi_5_10", f"train.threads={threads}"]
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     report["end_to_end"] = {
-        dev: end_to_end(robots, presentations, dev, overrides) for dev in devices}
+        dev: end_to_end(robots, presentations, dev, overrides) for dev in devices
+    }
     cfg = compose(overrides)
     work = coder_work_per_frame(cfg)
     report["roofline"] = {}
     for dev in devices:
         limits = machine_limits(threads, dev)
-        report["roofline"][dev] = {**limits, **work, "coder_bound_ms_per_frame": coder_bound_ms(work, limits, 1),
-                                   "coder_bound_ms_B16": coder_bound_ms(work, limits, 16)}
+        report["roofline"][dev] = {
+            **limits,
+            **work,
+            "coder_bound_ms_per_frame": coder_bound_ms(work, limits, 1),
+            "coder_bound_ms_B16": coder_bound_ms(work, limits, 16),
+        }
     rf = report["roofline"]["cpu"]
     coder = report.get("components_ms", {}).get("coder", {})
     # What the coder runs by default, and each Gram-form implementation (compiled kernels and
     # the numpy/torch fallback) measured beside it.
-    for key, name in (("coder_measured_over_bound", "encode_update_both_B1_gram_ms"),
-                      ("coder_cpp_measured_over_bound", "encode_update_both_B1_gram_cpp_ms"),
-                      ("coder_torch_measured_over_bound", "encode_update_both_B1_gram_torch_ms")):
+    for key, name in (
+        ("coder_measured_over_bound", "encode_update_both_B1_gram_ms"),
+        ("coder_cpp_measured_over_bound", "encode_update_both_B1_gram_cpp_ms"),
+        ("coder_torch_measured_over_bound", "encode_update_both_B1_gram_torch_ms"),
+    ):
         if coder.get(name):
             rf[key] = coder[name] / rf["coder_bound_ms_per_frame"]
     if coder.get("encode_update_both_B16_gram_ms"):
-        rf["coder_B16_measured_over_bound"] = coder["encode_update_both_B16_gram_ms"] / rf["coder_bound_ms_B16"]
+        rf["coder_B16_measured_over_bound"] = (
+            coder["encode_update_both_B16_gram_ms"] / rf["coder_bound_ms_B16"]
+        )
     on_gpu = report.get("components_ms", {}).get("cuda", {})
     for batch in (1, 16, 64):
         if on_gpu.get(f"encode_update_both_B{batch}_ms"):
-            report["roofline"]["cuda"][f"coder_B{batch}_measured_over_bound"] = (
-                on_gpu[f"encode_update_both_B{batch}_ms"] / coder_bound_ms(work, report["roofline"]["cuda"], batch))
+            report["roofline"]["cuda"][f"coder_B{batch}_measured_over_bound"] = on_gpu[
+                f"encode_update_both_B{batch}_ms"
+            ] / coder_bound_ms(work, report["roofline"]["cuda"], batch)
     for dev, by_b in report["end_to_end"].items():
         for b, r in by_b.items():
-            r["coder_bound_ms"] = coder_bound_ms(work, report["roofline"][dev], int(b.split("=")[1]))
+            r["coder_bound_ms"] = coder_bound_ms(
+                work, report["roofline"][dev], int(b.split("=")[1])
+            )
             r["step_over_coder_bound"] = r["lockstep_ms"] / r["coder_bound_ms"]
     cores, render_ms = usable_cores(), render_cpu_ms_per_frame()
     report["ceiling"] = {"cpu": {"cores": cores, "render_cpu_ms_per_frame": render_ms}}
     for b, r in report["end_to_end"]["cpu"].items():
-        ceiling = ceiling_steps_per_second(render_ms, r["coder_bound_ms"], int(b.split("=")[1]), cores)
-        report["ceiling"]["cpu"][b] = {"steps_per_second": ceiling,
-                                       "measured_over_ceiling": r["steps_per_second"] / ceiling}
+        ceiling = ceiling_steps_per_second(
+            render_ms, r["coder_bound_ms"], int(b.split("=")[1]), cores
+        )
+        report["ceiling"]["cpu"][b] = {
+            "steps_per_second": ceiling,
+            "measured_over_ceiling": r["steps_per_second"] / ceiling,
+        }
     return report
 
 
 def format_report(report: dict) -> str:
-    lines = [f"parallax-bench — torch {report['torch']}, {report['threads']} thread(s), "
-             f"CUDA {'yes' if report['cuda'] else 'no'}"]
+    lines = [
+        f"parallax-bench — torch {report['torch']}, {report['threads']} thread(s), "
+        f"CUDA {'yes' if report['cuda'] else 'no'}"
+    ]
     for group, figures in report.get("components_ms", {}).items():
         lines.append(f"[{group}]")
         for name, value in figures.items():
             lines.append(f"  {name:<48} {value:>10.3f}")
-    lines.append("[end to end] robot-iterations per second (median over presentations; the cases take turns)")
+    lines.append(
+        "[end to end] robot-iterations per second (median over presentations; the cases take turns)"
+    )
     for dev, by_b in report["end_to_end"].items():
         for b, r in by_b.items():
-            lines.append(f"  {dev} {b:<6} {r['steps_per_second']:>8.1f} steps/s   "
-                         f"lockstep {r['lockstep_ms']:.2f} ms   ×{r['step_over_coder_bound']:.1f} of the coder bound   "
-                         f"with the distance learner {r['trainer_steps_per_second']:.1f} steps/s")
+            lines.append(
+                f"  {dev} {b:<6} {r['steps_per_second']:>8.1f} steps/s   "
+                f"lockstep {r['lockstep_ms']:.2f} ms   ×{r['step_over_coder_bound']:.1f} of the coder bound   "
+                f"with the distance learner {r['trainer_steps_per_second']:.1f} steps/s"
+            )
     for dev, by_b in report["end_to_end"].items():
         for b, r in by_b.items():
             if "cpu_ms_per_robot_iteration" in r:
-                lines.append(f"  {dev} {b:<6} range {r['steps_per_second_min']:.1f}–{r['steps_per_second_max']:.1f} steps/s;  "
-                             f"{r['cpu_ms_per_robot_iteration']:.2f} ms of CPU per robot-iteration, "
-                             f"{r['busy_cores']:.2f} cores busy → {r['steps_per_second_all_cores_busy']:.1f} "
-                             f"steps/s if all {r['cores']} were")
+                lines.append(
+                    f"  {dev} {b:<6} range {r['steps_per_second_min']:.1f}–{r['steps_per_second_max']:.1f} steps/s;  "
+                    f"{r['cpu_ms_per_robot_iteration']:.2f} ms of CPU per robot-iteration, "
+                    f"{r['busy_cores']:.2f} cores busy → {r['steps_per_second_all_cores_busy']:.1f} "
+                    f"steps/s if all {r['cores']} were"
+                )
     for dev, rf in report["roofline"].items():
-        lines.append(f"[roofline {dev}] matmul {rf['matmul_gflops']:.1f} GFLOP/s, copy {rf['copy_gbps']:.1f} GB/s; "
-                     f"coder per frame {rf['flops'] / 1e6:.1f} MFLOP, {rf['bytes'] / 1e6:.1f} MB "
-                     f"→ bound {rf['coder_bound_ms_per_frame']:.4f} ms; a lockstep of 16 robots "
-                     f"{rf['coder_bound_ms_B16']:.3f} ms (the Gram matrix and dictionary reads once)")
+        lines.append(
+            f"[roofline {dev}] matmul {rf['matmul_gflops']:.1f} GFLOP/s, copy {rf['copy_gbps']:.1f} GB/s; "
+            f"coder per frame {rf['flops'] / 1e6:.1f} MFLOP, {rf['bytes'] / 1e6:.1f} MB "
+            f"→ bound {rf['coder_bound_ms_per_frame']:.4f} ms; a lockstep of 16 robots "
+            f"{rf['coder_bound_ms_B16']:.3f} ms (the Gram matrix and dictionary reads once)"
+        )
         if "coder_measured_over_bound" in rf:
-            variants = [f"{label} ×{rf[key]:.1f}" for key, label in (
-                ("coder_cpp_measured_over_bound", "compiled kernels"),
-                ("coder_torch_measured_over_bound", "numpy/torch loop")) if key in rf]
-            lines.append(f"  coder measured / bound: ×{rf['coder_measured_over_bound']:.1f}"
-                         + (f" ({', '.join(variants)})" if variants else ""))
-        gpu = [f"B={b} ×{rf[f'coder_B{b}_measured_over_bound']:.1f}" for b in (1, 16, 64)
-               if f"coder_B{b}_measured_over_bound" in rf]
+            variants = [
+                f"{label} ×{rf[key]:.1f}"
+                for key, label in (
+                    ("coder_cpp_measured_over_bound", "compiled kernels"),
+                    ("coder_torch_measured_over_bound", "numpy/torch loop"),
+                )
+                if key in rf
+            ]
+            lines.append(
+                f"  coder measured / bound: ×{rf['coder_measured_over_bound']:.1f}"
+                + (f" ({', '.join(variants)})" if variants else "")
+            )
+        gpu = [
+            f"B={b} ×{rf[f'coder_B{b}_measured_over_bound']:.1f}"
+            for b in (1, 16, 64)
+            if f"coder_B{b}_measured_over_bound" in rf
+        ]
         if gpu:
             lines.append(f"  coder measured / bound, by robots in the lockstep: {', '.join(gpu)}")
     if "ceiling" in report:
         top = report["ceiling"]["cpu"]
-        lines.append(f"[ceiling cpu] {top['cores']} cores; a left-eye frame costs {top['render_cpu_ms_per_frame']:.2f} ms "
-                     "of CPU to render alone; with the coder at its roofline bound and every core busy:")
+        lines.append(
+            f"[ceiling cpu] {top['cores']} cores; a left-eye frame costs {top['render_cpu_ms_per_frame']:.2f} ms "
+            "of CPU to render alone; with the coder at its roofline bound and every core busy:"
+        )
         for b, c in top.items():
             if b.startswith("B="):
-                lines.append(f"  {b:<6} ≤ {c['steps_per_second']:.1f} robot-iterations/s "
-                             f"(measured: {c['measured_over_ceiling']:.0%} of it)")
+                lines.append(
+                    f"  {b:<6} ≤ {c['steps_per_second']:.1f} robot-iterations/s "
+                    f"(measured: {c['measured_over_ceiling']:.0%} of it)"
+                )
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="parallax-bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=30, help="timed repeats per component")
-    parser.add_argument("--presentations", type=int, default=3, help="timed presentations per end-to-end case")
-    parser.add_argument("--robots", type=int, nargs="+", default=[1, 16], help="B values end to end")
+    parser.add_argument(
+        "--presentations", type=int, default=3, help="timed presentations per end-to-end case"
+    )
+    parser.add_argument(
+        "--robots", type=int, nargs="+", default=[1, 16], help="B values end to end"
+    )
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--no-components", action="store_true", help="end to end and roofline only")
     parser.add_argument("--json", default=None, help="also write the report to this file")
     args = parser.parse_args(argv)
     if args.repeats < 1 or args.presentations < 1 or min(args.robots) < 1 or args.threads < 1:
-        print("parallax-bench: error: --repeats, --presentations, --robots and --threads must be ≥ 1",
-              file=sys.stderr)
+        print(
+            "parallax-bench: error: --repeats, --presentations, --robots and --threads must be ≥ 1",
+            file=sys.stderr,
+        )
         sys.exit(2)
     robots = tuple(dict.fromkeys(args.robots))  # each B once, in the order given
     report = run(args.repeats, args.presentations, robots, args.threads, not args.no_components)

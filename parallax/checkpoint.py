@@ -82,7 +82,11 @@ def load(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str
 
 def global_rng_state() -> dict[str, Any]:
     """Global generators, saved too in case a library draws from them behind our back."""
-    return {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state()}
+    return {
+        "python": random.getstate(),
+        "numpy": np.random.get_state(),
+        "torch": torch.get_rng_state(),
+    }
 
 
 def set_global_rng_state(state: dict[str, Any]) -> None:

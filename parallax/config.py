@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import hashlib
 import re
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -41,7 +42,7 @@ def run_name(override_dirname: str) -> str:
     name = re.sub(r"[^A-Za-z0-9_.,=+-]", "", override_dirname.replace("/", "-")) or "default"
     if len(name) > MAX_RUN_NAME:
         digest = hashlib.sha1(override_dirname.encode()).hexdigest()[:10]
-        name = f"{name[:MAX_RUN_NAME - 11]}-{digest}"
+        name = f"{name[: MAX_RUN_NAME - 11]}-{digest}"
     return name
 
 
@@ -52,7 +53,8 @@ def register_resolvers() -> None:
 
 def compose(overrides: Sequence[str] = ()) -> DictConfig:
     """The composed configuration for these overrides, as `parallax-train` would see it."""
-    from hydra import compose as hydra_compose, initialize_config_module
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_module
     from hydra.core.global_hydra import GlobalHydra
 
     register_resolvers()
@@ -76,8 +78,9 @@ def load_run_config(run_dir: str | Path) -> DictConfig:
 
 #: Settings that never change a run's results (the same list as the run-directory name ignores
 #: in conf/config.yaml).
-RESULT_NEUTRAL_KEYS = frozenset({"device", "resume", "train.threads", "train.checkpoint_every",
-                                 "train.image_every"})
+RESULT_NEUTRAL_KEYS = frozenset(
+    {"device", "resume", "train.threads", "train.checkpoint_every", "train.image_every"}
+)
 #: Settings that may differ when a run is resumed: those, and train.presentations (which only
 #: changes how long the run goes on). perturbation.start_fraction may differ too, so long as the
 #: presentation it starts at (with train.presentations, :func:`perturbation_start`) does not: a
@@ -109,12 +112,15 @@ def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
 #: Settings added to conf/ after runs had been made without them, with the value such runs were
 #: trained with: a saved config that lacks one of them is read as having that value, so adding a
 #: setting neither blocks resuming old runs nor makes it look like an ablation in a report.
-SETTINGS_ADDED_LATER: dict[str, Any] = {"distance.outlier_mads": None, "distance.lm.weight_decay": 0.0,
-                                         "env.initial_pan_jitter_deg_per_m": 0.0,
-                                         "policy.eye_position_reference_m": 0.0,
-                                         "policy.reward_change_gain": 0.0,
-                                         "train.start_jitter_presentations": None,
-                                         "train.distance_readout": "last"}
+SETTINGS_ADDED_LATER: dict[str, Any] = {
+    "distance.outlier_mads": None,
+    "distance.lm.weight_decay": 0.0,
+    "env.initial_pan_jitter_deg_per_m": 0.0,
+    "policy.eye_position_reference_m": 0.0,
+    "policy.reward_change_gain": 0.0,
+    "train.start_jitter_presentations": None,
+    "train.distance_readout": "last",
+}
 
 
 def run_settings(config: dict) -> dict[str, Any]:
@@ -129,14 +135,18 @@ def changed_settings(saved: DictConfig, current: DictConfig) -> list[str]:
     saved_dict = OmegaConf.to_container(saved, resolve=True)
     current_dict = OmegaConf.to_container(current, resolve=True)
     before, after = run_settings(saved_dict), run_settings(current_dict)
-    changes = [f"{key}: {before.get(key, '(unset)')!r} → {after.get(key, '(unset)')!r}"
-               for key in sorted(set(before) | set(after))
-               if key not in RESUMABLE_CHANGES and before.get(key) != after.get(key)]
+    changes = [
+        f"{key}: {before.get(key, '(unset)')!r} → {after.get(key, '(unset)')!r}"
+        for key in sorted(set(before) | set(after))
+        if key not in RESUMABLE_CHANGES and before.get(key) != after.get(key)
+    ]
     # train.presentations alone would move a fractional perturbation start: compare where it starts
     start_before, start_after = perturbation_start(saved_dict), perturbation_start(current_dict)
     if start_before != start_after:
-        changes.append("the perturbation's start presentation (perturbation.start_fraction × "
-                       f"train.presentations): {start_before} → {start_after}")
+        changes.append(
+            "the perturbation's start presentation (perturbation.start_fraction × "
+            f"train.presentations): {start_before} → {start_after}"
+        )
     return changes
 
 
@@ -183,44 +193,98 @@ def validate(cfg: DictConfig) -> None:
     """Raise ConfigError for the first value that cannot work."""
     lateral = list(cfg.curriculum.lateral_positions)
     _require(len(lateral) > 0, "curriculum.lateral_positions", "the lateral list L is empty")
-    _require(all(isinstance(v, (int, float)) for v in lateral), "curriculum.lateral_positions",
-             f"must be numbers in metres, got {lateral}")
-    _require(all(b > a for a, b in zip(lateral, lateral[1:])), "curriculum.lateral_positions",
-             f"must be strictly increasing, got {lateral}")
+    _require(
+        all(isinstance(v, (int, float)) for v in lateral),
+        "curriculum.lateral_positions",
+        f"must be numbers in metres, got {lateral}",
+    )
+    _require(
+        all(b > a for a, b in zip(lateral, lateral[1:])),
+        "curriculum.lateral_positions",
+        f"must be strictly increasing, got {lateral}",
+    )
     if cfg.curriculum.get("stages"):
         for i, stage in enumerate(cfg.curriculum.stages):
-            _require(len(stage) > 0 and set(stage) <= set(lateral), f"curriculum.stages[{i}]",
-                     f"must be a non-empty subset of curriculum.lateral_positions, got {list(stage)}")
-        _require(list(cfg.curriculum.stages[-1]) == lateral, "curriculum.stages",
-                 "the last stage must equal curriculum.lateral_positions")
-    _require(int(cfg.env.trial_length) >= 2, "env.trial_length",
-             f"needs at least 2 iterations per trial, got {cfg.env.trial_length}")
-    _require(int(cfg.env.get("robots", 1)) >= 1, "env.robots", f"must be ≥ 1, got {cfg.env.get('robots')}")
-    _require(int(cfg.distance.queue_size) >= 1, "distance.queue_size",
-             f"the queue size c must be ≥ 1, got {cfg.distance.queue_size}")
+            _require(
+                len(stage) > 0 and set(stage) <= set(lateral),
+                f"curriculum.stages[{i}]",
+                f"must be a non-empty subset of curriculum.lateral_positions, got {list(stage)}",
+            )
+        _require(
+            list(cfg.curriculum.stages[-1]) == lateral,
+            "curriculum.stages",
+            "the last stage must equal curriculum.lateral_positions",
+        )
+    _require(
+        int(cfg.env.trial_length) >= 2,
+        "env.trial_length",
+        f"needs at least 2 iterations per trial, got {cfg.env.trial_length}",
+    )
+    _require(
+        int(cfg.env.get("robots", 1)) >= 1,
+        "env.robots",
+        f"must be ≥ 1, got {cfg.env.get('robots')}",
+    )
+    _require(
+        int(cfg.distance.queue_size) >= 1,
+        "distance.queue_size",
+        f"the queue size c must be ≥ 1, got {cfg.distance.queue_size}",
+    )
     scales = list(cfg.coder.scales)
     _require(len(scales) > 0, "coder.scales", "needs at least one scale")
     for s in scales:
-        _require(s in cfg.coder.scale_specs, "coder.scales",
-                 f"unknown scale {s!r}; known: {sorted(cfg.coder.scale_specs)}")
+        _require(
+            s in cfg.coder.scale_specs,
+            "coder.scales",
+            f"unknown scale {s!r}; known: {sorted(cfg.coder.scale_specs)}",
+        )
         window = int(cfg.coder.scale_specs[s].window)
-        _require(window <= int(cfg.env.image_size), f"coder.scale_specs.{s}.window",
-                 f"window {window} px is larger than the image (env.image_size={cfg.env.image_size})")
-    _require(int(cfg.train.presentations) >= 1, "train.presentations",
-             f"must be ≥ 1, got {cfg.train.presentations}")
-    _require(int(cfg.train.checkpoint_every) >= 1, "train.checkpoint_every",
-             f"must be ≥ 1, got {cfg.train.checkpoint_every}")
-    _require(int(cfg.metrics.mae_window) >= 1, "metrics.mae_window", f"must be ≥ 1, got {cfg.metrics.mae_window}")
-    _require(cfg.device in ("cpu", "cuda") or str(cfg.device).startswith("cuda:"), "device",
-             f"must be cpu or cuda, got {cfg.device!r}")
+        _require(
+            window <= int(cfg.env.image_size),
+            f"coder.scale_specs.{s}.window",
+            f"window {window} px is larger than the image (env.image_size={cfg.env.image_size})",
+        )
+    _require(
+        int(cfg.train.presentations) >= 1,
+        "train.presentations",
+        f"must be ≥ 1, got {cfg.train.presentations}",
+    )
+    _require(
+        int(cfg.train.checkpoint_every) >= 1,
+        "train.checkpoint_every",
+        f"must be ≥ 1, got {cfg.train.checkpoint_every}",
+    )
+    _require(
+        int(cfg.metrics.mae_window) >= 1,
+        "metrics.mae_window",
+        f"must be ≥ 1, got {cfg.metrics.mae_window}",
+    )
+    _require(
+        cfg.device in ("cpu", "cuda") or str(cfg.device).startswith("cuda:"),
+        "device",
+        f"must be cpu or cuda, got {cfg.device!r}",
+    )
     jitter_limit = cfg.train.get("start_jitter_presentations")
-    _require(jitter_limit is None or (isinstance(jitter_limit, int) and not isinstance(jitter_limit, bool)
-                                      and jitter_limit >= 0), "train.start_jitter_presentations",
-             f"must be null or a whole number of presentations ≥ 0, got {jitter_limit!r}")
+    _require(
+        jitter_limit is None
+        or (
+            isinstance(jitter_limit, int)
+            and not isinstance(jitter_limit, bool)
+            and jitter_limit >= 0
+        ),
+        "train.start_jitter_presentations",
+        f"must be null or a whole number of presentations ≥ 0, got {jitter_limit!r}",
+    )
     readout = cfg.train.get("distance_readout", "last")
-    _require(readout in DISTANCE_READOUTS, "train.distance_readout",
-             f"must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}")
+    _require(
+        readout in DISTANCE_READOUTS,
+        "train.distance_readout",
+        f"must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}",
+    )
     start = cfg.perturbation.get("start_fraction")
     if start is not None:
-        _require(0.0 <= float(start) <= 1.0, "perturbation.start_fraction",
-                 f"must be between 0 and 1, got {start}")
+        _require(
+            0.0 <= float(start) <= 1.0,
+            "perturbation.start_fraction",
+            f"must be between 0 and 1, got {start}",
+        )

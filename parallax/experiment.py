@@ -33,17 +33,17 @@ from parallax.policy.features import REFERENCE_MODE
 class Presentation:
     """What B robots did during one stimulus presentation."""
 
-    lateral_positions: list[float]   # the list L used (metres)
-    pans: np.ndarray                 # (B, r) pan at the last iteration of each trial, q_p (deg)
-    targets: np.ndarray              # (B, r) target pan α* at that iteration (deg)
+    lateral_positions: list[float]  # the list L used (metres)
+    pans: np.ndarray  # (B, r) pan at the last iteration of each trial, q_p (deg)
+    targets: np.ndarray  # (B, r) target pan α* at that iteration (deg)
     # (B, r) beyond the paper: the pan at the iteration of each trial whose image the coder
     # encoded best (highest reward −(eC+eF)); a readout of s that a runaway's end does not spoil
     best_pans: np.ndarray
-    distances: np.ndarray            # (B,) metres
-    textures: np.ndarray             # (B,) texture indices
-    steps: int                       # iterations per robot
-    reward: float = float("nan")     # mean coder reward over the presentation
-    errors: dict[str, float] = field(default_factory=dict)   # mean reconstruction error per scale
+    distances: np.ndarray  # (B,) metres
+    textures: np.ndarray  # (B,) texture indices
+    steps: int  # iterations per robot
+    reward: float = float("nan")  # mean coder reward over the presentation
+    errors: dict[str, float] = field(default_factory=dict)  # mean reconstruction error per scale
     policy_stats: dict[str, float] = field(default_factory=dict)
     last_view: np.ndarray | None = None  # robot 0's I0 beside its last image (for TensorBoard)
     start_pans: np.ndarray | None = None  # (B, r) pan at the first iteration of each trial (deg)
@@ -75,7 +75,9 @@ class Experiment:
         self.cfg = cfg
         self.device = torch.device(cfg.device)
         if self.device.type == "cuda" and not torch.cuda.is_available():
-            raise RuntimeError("device=cuda was asked for but torch sees no CUDA device; use device=cpu")
+            raise RuntimeError(
+                "device=cuda was asked for but torch sees no CUDA device; use device=cpu"
+            )
         # OpenCV's calls in a step (the retina's cvtColor and pyrDown, the §5 blur) take tens of
         # µs on images this small, and between them its worker thread spun: 0.8–0.9 ms of CPU per
         # step at B = 1 (per-thread CPU times, two runs each way), taken from the threads that
@@ -94,18 +96,28 @@ class Experiment:
         # One seed per robot's world, then the coder, the policy and the distance learner.
         seeds = seeds_for(cfg.seed, self.robots + 3)
         self.envs = [
-            parallax.envs.load(seed=seeds[i], lateral_positions=self.stages[0],
-                               camera_rotation_deg=0.0, blur_sigma=0.0,
-                               rotation_axis=cfg.perturbation.rotation_axis, **env_kwargs)
+            parallax.envs.load(
+                seed=seeds[i],
+                lateral_positions=self.stages[0],
+                camera_rotation_deg=0.0,
+                blur_sigma=0.0,
+                rotation_axis=cfg.perturbation.rotation_axis,
+                **env_kwargs,
+            )
             for i in range(self.robots)
         ]
-        self.coder = instantiate(cfg.coder, image_size=int(cfg.env.image_size),
-                                 seed=seeds[self.robots]).to(self.device)
-        self.policy = instantiate(cfg.policy, state_dim=self.coder.state_dim,
-                                  num_scales=len(cfg.coder.scales),
-                                  seed=seeds[self.robots + 1]).to(self.device)
-        self.distance = instantiate(cfg.distance, lateral_positions=self.lateral_positions,
-                                    seed=seeds[self.robots + 2])
+        self.coder = instantiate(
+            cfg.coder, image_size=int(cfg.env.image_size), seed=seeds[self.robots]
+        ).to(self.device)
+        self.policy = instantiate(
+            cfg.policy,
+            state_dim=self.coder.state_dim,
+            num_scales=len(cfg.coder.scales),
+            seed=seeds[self.robots + 1],
+        ).to(self.device)
+        self.distance = instantiate(
+            cfg.distance, lateral_positions=self.lateral_positions, seed=seeds[self.robots + 2]
+        )
         if hasattr(self.distance, "to"):  # DistanceLearner.to, or an nn.Module
             self.distance.to(self.device)
         self.stage = 0
@@ -128,8 +140,10 @@ class Experiment:
     def set_perturbation(self, on: bool) -> None:
         p = self.cfg.perturbation
         for env in self.envs:
-            env.task.set_perturbation(camera_rotation_deg=float(p.camera_rotation_deg) if on else 0.0,
-                                      blur_sigma=float(p.blur_sigma) if on else 0.0)
+            env.task.set_perturbation(
+                camera_rotation_deg=float(p.camera_rotation_deg) if on else 0.0,
+                blur_sigma=float(p.blur_sigma) if on else 0.0,
+            )
 
     # --- one presentation ------------------------------------------------------------------
     def _images(self, observations: list[dict], key: str) -> torch.Tensor:
@@ -145,9 +159,14 @@ class Experiment:
         with the current dictionaries and without learning (the coder's reference must be set)."""
         return self.coder(reference, learn=False).state
 
-    def policy_state(self, theta: torch.Tensor, reference_state: torch.Tensor | None,
-                     pans_deg: np.ndarray, lateral_m: float,
-                     reward_change: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> torch.Tensor:
+    def policy_state(
+        self,
+        theta: torch.Tensor,
+        reference_state: torch.Tensor | None,
+        pans_deg: np.ndarray,
+        lateral_m: float,
+        reward_change: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> torch.Tensor:
         """What the policy acts on: θ (B, state_dim), minus θ_ref with ``feature_norm=difference``,
         then the eye-position entry when ``policy.eye_position_reference_m`` > 0, then the
         reward-change entry when ``policy.reward_change_gain`` > 0 (all three beyond the paper),
@@ -161,14 +180,21 @@ class Experiment:
             extra.append(self.policy.eye_position_feature(pans, lateral_m))
         if self.policy.reward_change_dims:
             if reward_change is None:
-                extra.append(torch.zeros(state.shape[0], 1, dtype=self.policy.actor.dtype,
-                                         device=self.policy.actor.device))
+                extra.append(
+                    torch.zeros(
+                        state.shape[0],
+                        1,
+                        dtype=self.policy.actor.dtype,
+                        device=self.policy.actor.device,
+                    )
+                )
             else:
                 extra.append(self.policy.reward_change_feature(*reward_change))
         return torch.cat([state, *[e.to(state.dtype) for e in extra]], dim=1) if extra else state
 
-    def run_presentation(self, learn: bool = True, greedy: bool = False,
-                         keep_view: bool = False) -> Presentation:
+    def run_presentation(
+        self, learn: bool = True, greedy: bool = False, keep_view: bool = False
+    ) -> Presentation:
         """All robots live through one presentation; learning on or frozen.
 
         The worlds step on the GL thread (:func:`parallax.envs.gl_thread`) while this thread
@@ -184,7 +210,9 @@ class Experiment:
         world = parallax.envs.gl_thread()
         futures = [world.submit(env.reset) for env in self.envs]
         # every robot's I0 before any encoding
-        self.coder.set_reference(self._images([f.result().observation for f in futures], "reference"))
+        self.coder.set_reference(
+            self._images([f.result().observation for f in futures], "reference")
+        )
         timesteps, encodings = self._gather(futures)
         obs = [ts.observation for ts in timesteps]
         lateral = list(self.envs[0].task.lateral_positions)
@@ -198,7 +226,7 @@ class Experiment:
         reward_sum, error_sums, n_enc = 0.0, {}, 0
         stat_sums: dict[str, float] = {}
         n_updates = steps = 0
-        learning: Future | None = None   # a dictionary step running on the coder's helper thread
+        learning: Future | None = None  # a dictionary step running on the coder's helper thread
 
         def finish_dictionary_step() -> None:
             """This iteration's dictionary step done: waited for, or taken now on this thread."""
@@ -220,8 +248,11 @@ class Experiment:
                     # learns and acts (the world and the helper would otherwise wait) and the world
                     # renders; waited for before anything reads the dictionaries again
                     learning = self.coder.learn_from_async(encodings)
-                out = encodings[0].output if len(encodings) == 1 else CoderOutput.join(
-                    [encoding.output for encoding in encodings])
+                out = (
+                    encodings[0].output
+                    if len(encodings) == 1
+                    else CoderOutput.join([encoding.output for encoding in encodings])
+                )
                 reward_sum += float(out.reward.mean())
                 for scale, e in out.errors.items():
                     error_sums[scale] = error_sums.get(scale, 0.0) + float(e.mean())
@@ -231,12 +262,14 @@ class Experiment:
                 if iteration == 0:
                     start_pans[:, p] = current_pans
                 rewards = out.reward.cpu().numpy().astype(np.float64)
-                better = rewards > best_rewards[:, p]      # ties keep the earlier pan
+                better = rewards > best_rewards[:, p]  # ties keep the earlier pan
                 best_rewards[better, p] = rewards[better]
                 best_pans[better, p] = current_pans[better]
                 # the last step's reward change, within the trial only (none at its first iteration)
                 change = None if iteration == 0 else (rewards, prev_rewards, prev_increments)
-                state = self.policy_state(out.state, reference_state, current_pans, lateral[p], change)
+                state = self.policy_state(
+                    out.state, reference_state, current_pans, lateral[p], change
+                )
                 # Robots move in lockstep, so they cross a trial boundary together; the transition into
                 # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
                 if learn and prev_state is not None and iteration > 0:
@@ -252,27 +285,39 @@ class Experiment:
                     break
                 action = self.policy.act(state, greedy=greedy)
                 increments = self.policy.action_values[action].cpu().numpy()
-                futures = [world.submit(env.step, float(a)) for env, a in zip(self.envs, increments)]
-                finish_dictionary_step()   # while the next frames render; they are encoded with it
+                futures = [
+                    world.submit(env.step, float(a)) for env, a in zip(self.envs, increments)
+                ]
+                finish_dictionary_step()  # while the next frames render; they are encoded with it
                 timesteps, encodings = self._gather(futures)
                 obs = [ts.observation for ts in timesteps]
-                prev_state, prev_action, prev_rewards, prev_increments = state, action, rewards, increments
+                prev_state, prev_action, prev_rewards, prev_increments = (
+                    state,
+                    action,
+                    rewards,
+                    increments,
+                )
                 steps += 1
         finally:
             if learning is not None:
-                wait([learning])   # never leave a dictionary step running behind an error
+                wait([learning])  # never leave a dictionary step running behind an error
 
         view = None
         if keep_view:
             view = np.concatenate([obs[0]["reference"], obs[0]["image"]], axis=1)
         return Presentation(
-            lateral_positions=lateral, pans=pans, targets=targets, best_pans=best_pans,
+            lateral_positions=lateral,
+            pans=pans,
+            targets=targets,
+            best_pans=best_pans,
             distances=np.array([float(o["distance"]) for o in obs]),
             textures=np.array([int(o["texture_index"]) for o in obs]),
-            steps=steps + 1, reward=reward_sum / n_enc,
+            steps=steps + 1,
+            reward=reward_sum / n_enc,
             errors={k: v / n_enc for k, v in error_sums.items()},
             policy_stats={k: v / n_updates for k, v in stat_sums.items()} if n_updates else {},
-            last_view=view, start_pans=start_pans,
+            last_view=view,
+            start_pans=start_pans,
         )
 
     def _gather(self, futures: list[Future]) -> tuple[list[Any], list[Encoding]]:

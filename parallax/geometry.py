@@ -17,8 +17,9 @@ FOCAL_LENGTH_PX = 531.0
 NEAREST_DISTANCE_M = 3.0
 
 
-def disparity_score(lateral_m: float, distance_m: float = NEAREST_DISTANCE_M,
-                    focal_px: float = FOCAL_LENGTH_PX) -> float:
+def disparity_score(
+    lateral_m: float, distance_m: float = NEAREST_DISTANCE_M, focal_px: float = FOCAL_LENGTH_PX
+) -> float:
     """Disparity f·l/d in pixels of a lateral move ``lateral_m`` at ``distance_m`` (Table 1)."""
     if not math.isfinite(distance_m) or distance_m <= 0:
         raise ValueError(f"distance must be a positive finite number of metres, got {distance_m!r}")

@@ -28,9 +28,16 @@ from parallax.envs.best_match import views_around_target
 from parallax.experiment import Experiment
 
 
-def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME,
-          lateral_position: float | None = None, distances=(3.0, 5.0, 7.0, 10.0), textures: int = 4,
-          span: float = 1.0, step: float = 0.05, texture_indices=None) -> dict:
+def sweep(
+    run_dir: str | Path,
+    checkpoint_name: str = checkpoint.CHECKPOINT_NAME,
+    lateral_position: float | None = None,
+    distances=(3.0, 5.0, 7.0, 10.0),
+    textures: int = 4,
+    span: float = 1.0,
+    step: float = 0.05,
+    texture_indices=None,
+) -> dict:
     """Rewards (stimuli × offsets), per-scale errors and E_π[a] around α*; see the module doc."""
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
@@ -44,11 +51,15 @@ def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME
         actions = exp.policy.action_values.cpu().numpy()
         rewards, errors, mean_steps = [], [], []
         for distance in distances:
-            for texture in (range(textures) if texture_indices is None else texture_indices):
-                reference, target, views = views_around_target(exp.envs[0], texture, float(distance), lateral, offsets)
+            for texture in range(textures) if texture_indices is None else texture_indices:
+                reference, target, views = views_around_target(
+                    exp.envs[0], texture, float(distance), lateral, offsets
+                )
                 reference_image = torch.from_numpy(reference[None].copy())
                 exp.coder.set_reference(reference_image)
-                baseline = exp.reference_states(reference_image) if exp.uses_reference_states else None
+                baseline = (
+                    exp.reference_states(reference_image) if exp.uses_reference_states else None
+                )
                 row_r, row_e, row_a = [], [], []
                 for offset, frame in zip(offsets, views):
                     out = exp.coder(torch.from_numpy(frame[None].copy()), learn=False)
@@ -56,7 +67,9 @@ def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME
                     # with policy.reward_change_gain: as if the eye had come from the previous
                     # offset by a leftward turn (+), as it does from pan 0 towards α* and beyond
                     change = (reward_here, np.array([row_r[-1]]), np.ones(1)) if row_r else None
-                    state = exp.policy_state(out.state, baseline, np.array([target + offset]), lateral, change)
+                    state = exp.policy_state(
+                        out.state, baseline, np.array([target + offset]), lateral, change
+                    )
                     row_r.append(float(out.reward[0]))
                     row_e.append([float(e[0]) for e in out.errors.values()])
                     row_a.append(float(exp.policy.probabilities(state)[0].cpu().numpy() @ actions))
@@ -67,24 +80,42 @@ def sweep(run_dir: str | Path, checkpoint_name: str = checkpoint.CHECKPOINT_NAME
     finally:
         exp.close()
     rewards_arr = np.asarray(rewards)
-    return {"run_dir": str(run_dir), "checkpoint": checkpoint_name, "lateral_position_m": lateral,
-            "offsets_deg": offsets.tolist(), "scales": scales,
-            "reward": rewards_arr.mean(axis=0).tolist(),
-            "errors": {s: np.asarray(errors)[:, :, i].mean(axis=0).tolist() for i, s in enumerate(scales)},
-            "mean_step_deg": np.asarray(mean_steps).mean(axis=0).tolist(),
-            "peak_offsets_deg": offsets[rewards_arr.argmax(axis=1)].tolist()}
+    return {
+        "run_dir": str(run_dir),
+        "checkpoint": checkpoint_name,
+        "lateral_position_m": lateral,
+        "offsets_deg": offsets.tolist(),
+        "scales": scales,
+        "reward": rewards_arr.mean(axis=0).tolist(),
+        "errors": {
+            s: np.asarray(errors)[:, :, i].mean(axis=0).tolist() for i, s in enumerate(scales)
+        },
+        "mean_step_deg": np.asarray(mean_steps).mean(axis=0).tolist(),
+        "peak_offsets_deg": offsets[rewards_arr.argmax(axis=1)].tolist(),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m parallax.landscape", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.landscape", description=__doc__.split("\n\n")[0]
+    )
     parser.add_argument("run_dirs", nargs="+", metavar="RUN", help="one or more run directories")
     parser.add_argument("--checkpoint", default=checkpoint.CHECKPOINT_NAME)
-    parser.add_argument("--lateral", type=float, default=None,
-                        help="lateral position in metres (default: the run's first)")
+    parser.add_argument(
+        "--lateral",
+        type=float,
+        default=None,
+        help="lateral position in metres (default: the run's first)",
+    )
     parser.add_argument("--distances", type=float, nargs="+", default=[3.0, 5.0, 7.0, 10.0])
     parser.add_argument("--textures", type=int, default=4, help="training textures per distance")
-    parser.add_argument("--texture-indices", type=int, nargs="+", default=None,
-                        help="these training textures instead of the first --textures")
+    parser.add_argument(
+        "--texture-indices",
+        type=int,
+        nargs="+",
+        default=None,
+        help="these training textures instead of the first --textures",
+    )
     parser.add_argument("--span", type=float, default=1.0, help="largest |pan − α*|, degrees")
     parser.add_argument("--json", help="also write the result here (a list when several runs)")
     parser.add_argument("--plot", help="also plot E_π[a] and the reward of every run into this PNG")
@@ -94,14 +125,23 @@ def main(argv: list[str] | None = None) -> int:
             print(f"[landscape] {run_dir} has no {args.checkpoint}", file=sys.stderr)
             return 2
     if args.textures < 1 or args.span <= 0:
-        print(f"[landscape] --textures must be ≥ 1 and --span > 0, got {args.textures} and {args.span}",
-              file=sys.stderr)
+        print(
+            f"[landscape] --textures must be ≥ 1 and --span > 0, got {args.textures} and {args.span}",
+            file=sys.stderr,
+        )
         return 2
     torch.set_num_threads(1)
     results = []
     for run_dir in args.run_dirs:
-        result = sweep(run_dir, args.checkpoint, args.lateral, args.distances, args.textures, args.span,
-                       texture_indices=args.texture_indices)
+        result = sweep(
+            run_dir,
+            args.checkpoint,
+            args.lateral,
+            args.distances,
+            args.textures,
+            args.span,
+            texture_indices=args.texture_indices,
+        )
         results.append(result)
         if len(args.run_dirs) > 1:
             print(f"== {run_dir}")
@@ -113,21 +153,29 @@ def main(argv: list[str] | None = None) -> int:
         from parallax.plots import pursuit_landscape
 
         # a run given twice gets its position in the list, so no line hides another
-        labels = [f"{_label(run)} [{i + 1}]" if args.run_dirs.count(run) > 1 else _label(run)
-                  for i, run in enumerate(args.run_dirs)]
+        labels = [
+            f"{_label(run)} [{i + 1}]" if args.run_dirs.count(run) > 1 else _label(run)
+            for i, run in enumerate(args.run_dirs)
+        ]
         print(f"[landscape] plot: {pursuit_landscape(dict(zip(labels, results)), args.plot)}")
     return 0
 
 
 def _print_table(result: dict) -> None:
-    header = "offset °   reward  " + "  ".join(f"e_{s:<6}" for s in result["scales"]) + "  E[step] °"
+    header = (
+        "offset °   reward  " + "  ".join(f"e_{s:<6}" for s in result["scales"]) + "  E[step] °"
+    )
     print(header)
     for i, offset in enumerate(result["offsets_deg"]):
         errs = "  ".join(f"{result['errors'][s][i]:.4f}  " for s in result["scales"])
-        print(f"{offset:+7.2f}  {result['reward'][i]:8.4f}  {errs}  {result['mean_step_deg'][i]:+.3f}")
+        print(
+            f"{offset:+7.2f}  {result['reward'][i]:8.4f}  {errs}  {result['mean_step_deg'][i]:+.3f}"
+        )
     peaks = np.asarray(result["peak_offsets_deg"])
-    print(f"reward peak − α* per stimulus: median {np.median(peaks):+.2f}°, "
-          f"range {peaks.min():+.2f}…{peaks.max():+.2f}° ({len(peaks)} stimuli)")
+    print(
+        f"reward peak − α* per stimulus: median {np.median(peaks):+.2f}°, "
+        f"range {peaks.min():+.2f}…{peaks.max():+.2f}° ({len(peaks)} stimuli)"
+    )
 
 
 def _label(run_dir: str) -> str:
@@ -135,7 +183,9 @@ def _label(run_dir: str) -> str:
     cfg = load_run_config(Path(run_dir))
     policy = cfg.policy
     eye = float(policy.get("eye_position_reference_m", 0.0) or 0.0)
-    extras = [f"feature_norm={policy.feature_norm}"] + ([f"eye_position_reference_m={eye:g}"] if eye else [])
+    extras = [f"feature_norm={policy.feature_norm}"] + (
+        [f"eye_position_reference_m={eye:g}"] if eye else []
+    )
     return f"{cfg.curriculum.name} seed {cfg.seed}: " + ", ".join(extras)
 
 

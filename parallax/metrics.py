@@ -9,7 +9,7 @@ last ``window`` trials — over all positions together and per position.
 from __future__ import annotations
 
 from collections import deque
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -52,19 +52,25 @@ class EyeMovementTracker:
         out = {}
         for k, v in self.per_position.items():
             tail = np.asarray(list(v)[-n:], dtype=np.float64)
-            out[k] = {"mean": float(tail.mean()) if tail.size else float("nan"),
-                      "var": float(tail.var()) if tail.size else float("nan"),
-                      "trials": int(tail.size)}
+            out[k] = {
+                "mean": float(tail.mean()) if tail.size else float("nan"),
+                "var": float(tail.var()) if tail.size else float("nan"),
+                "trials": int(tail.size),
+            }
         return out
 
     def state_dict(self) -> dict:
-        return {"overall": list(self.overall), "trials": self.trials,
-                "per_position": {k: list(v) for k, v in self.per_position.items()}}
+        return {
+            "overall": list(self.overall),
+            "trials": self.trials,
+            "per_position": {k: list(v) for k, v in self.per_position.items()},
+        }
 
     def load_state_dict(self, state: dict) -> None:
         self.overall = deque(state["overall"], maxlen=self.window)
-        self.per_position = {k: deque(state["per_position"].get(k, []), maxlen=self.window)
-                             for k in self.labels}
+        self.per_position = {
+            k: deque(state["per_position"].get(k, []), maxlen=self.window) for k in self.labels
+        }
         self.trials = int(state["trials"])
 
 
@@ -93,8 +99,9 @@ class DistanceErrorTracker:
         self.pairs = deque((tuple(p) for p in state["pairs"]), maxlen=self.window)
 
 
-def learn_online(learner, tracker: DistanceErrorTracker, pans: np.ndarray,
-                 distances: np.ndarray) -> dict[str, float]:
+def learn_online(
+    learner, tracker: DistanceErrorTracker, pans: np.ndarray, distances: np.ndarray
+) -> dict[str, float]:
     """Paper §3.5 online: predict each new s before learning it (the honest online error, kept by
     `tracker`), then queue it (eq. 9) and fit. The rows of ``pans`` are one presentation's
     vectors, one per robot: all are predicted, then queued, then fitted once (with one robot,

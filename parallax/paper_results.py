@@ -27,28 +27,68 @@ MULTI_LISTS_CM: dict[str, tuple[str, ...]] = {
 #: Table 2: average (variance) of the eye-movement error over the last 100 trials, degrees.
 #: None where the paper has "-" (the position is not in that run's list).
 TABLE2: dict[str, dict[str, tuple[float, float] | None]] = {
-    SINGLE: {"5": (0.18, 0.10), "7": (0.16, 0.06), "10": (0.16, 0.02),
-             "13": (0.18, 0.02), "15": (0.30, 0.08), "20": (0.91, 1.15)},
-    MULTI_5_10: {"5": (0.18, 0.08), "7": (0.16, 0.06), "10": (0.17, 0.06),
-                 "13": None, "15": None, "20": None},
-    MULTI_5_20: {"5": (0.25, 0.13), "7": (0.18, 0.06), "10": (0.18, 0.07),
-                 "13": (0.17, 0.03), "15": (0.17, 0.03), "20": (0.19, 0.04)},
+    SINGLE: {
+        "5": (0.18, 0.10),
+        "7": (0.16, 0.06),
+        "10": (0.16, 0.02),
+        "13": (0.18, 0.02),
+        "15": (0.30, 0.08),
+        "20": (0.91, 1.15),
+    },
+    MULTI_5_10: {
+        "5": (0.18, 0.08),
+        "7": (0.16, 0.06),
+        "10": (0.17, 0.06),
+        "13": None,
+        "15": None,
+        "20": None,
+    },
+    MULTI_5_20: {
+        "5": (0.25, 0.13),
+        "7": (0.18, 0.06),
+        "10": (0.18, 0.07),
+        "13": (0.17, 0.03),
+        "15": (0.17, 0.03),
+        "20": (0.19, 0.04),
+    },
 }
 
 #: Table 3: the same after the perturbations were applied and training continued.
 TABLE3: dict[str, dict[str, tuple[float, float] | None]] = {
-    SINGLE: {"5": (0.12, 0.01), "7": (0.14, 0.01), "10": (0.21, 0.04),
-             "13": (0.36, 0.12), "15": (0.54, 0.21), "20": (1.09, 1.03)},
-    MULTI_5_10: {"5": (0.13, 0.01), "7": (0.15, 0.01), "10": (0.18, 0.02),
-                 "13": None, "15": None, "20": None},
-    MULTI_5_20: {"5": (0.16, 0.02), "7": (0.16, 0.03), "10": (0.18, 0.01),
-                 "13": (0.21, 0.04), "15": (0.25, 0.04), "20": (0.39, 0.13)},
+    SINGLE: {
+        "5": (0.12, 0.01),
+        "7": (0.14, 0.01),
+        "10": (0.21, 0.04),
+        "13": (0.36, 0.12),
+        "15": (0.54, 0.21),
+        "20": (1.09, 1.03),
+    },
+    MULTI_5_10: {
+        "5": (0.13, 0.01),
+        "7": (0.15, 0.01),
+        "10": (0.18, 0.02),
+        "13": None,
+        "15": None,
+        "20": None,
+    },
+    MULTI_5_20: {
+        "5": (0.16, 0.02),
+        "7": (0.16, 0.03),
+        "10": (0.18, 0.01),
+        "13": (0.21, 0.04),
+        "15": (0.25, 0.04),
+        "20": (0.39, 0.13),
+    },
 }
 
 #: Columns of Tables 4–5: the keys of `parallax.distance.metrics.distance_error_by_range`.
 DISTANCE_RANGES: tuple[str, ...] = ("3-4.9", "5-6.9", "7-10", "total")
-DISTANCE_RANGE_TITLES: dict[str, str] = {"3-4.9": "3 to 4.9 m", "5-6.9": "5 to 6.9 m",
-                                         "7-10": "7 to 10 m", "total": "Total average"}
+DISTANCE_RANGE_TITLES: dict[str, str] = {
+    "3-4.9": "3 to 4.9 m",
+    "5-6.9": "5 to 6.9 m",
+    "7-10": "7 to 10 m",
+    "total": "Total average",
+}
 
 #: Rows of Tables 4–5: (lateral list L in cm, weighting of eq. 10–12 on).
 NO_WEIGHTING_5_10 = "5-10 cm without weighting"

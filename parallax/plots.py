@@ -4,8 +4,8 @@ perturbation starts), MAE per lateral position, and distance error against dista
 from __future__ import annotations
 
 import textwrap
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import matplotlib
 
@@ -27,8 +27,12 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def mae_curves(records: Sequence[dict], path: str | Path, title: str = "Eye-movement MAE",
-               perturbation_at: int | None = None) -> Path:
+def mae_curves(
+    records: Sequence[dict],
+    path: str | Path,
+    title: str = "Eye-movement MAE",
+    perturbation_at: int | None = None,
+) -> Path:
     """Fig. 7–9: the sliding-window MAE (eq. 16) per lateral position against trials."""
     path = Path(path)
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -36,8 +40,13 @@ def mae_curves(records: Sequence[dict], path: str | Path, title: str = "Eye-move
     labels = list(records[-1]["mae_per_position"]) if records else []
     cmap = plt.get_cmap("viridis", max(len(labels), 2))
     for i, label in enumerate(labels):
-        ax.plot(x, [r["mae_per_position"].get(label, np.nan) for r in records], color=cmap(i),
-                lw=1, label=f"{label} cm")
+        ax.plot(
+            x,
+            [r["mae_per_position"].get(label, np.nan) for r in records],
+            color=cmap(i),
+            lw=1,
+            label=f"{label} cm",
+        )
     ax.plot(x, [r["mae"] for r in records], color="k", lw=2, label="all")
     if perturbation_at is not None:
         ax.axvline(perturbation_at, color="gray", ls="--", label="perturbation")
@@ -57,7 +66,12 @@ def mae_per_position(results: dict[str, dict[str, float]], path: str | Path) -> 
     labels = list(results[modes[0]])
     width = 0.8 / len(modes)
     for i, mode in enumerate(modes):
-        ax.bar(np.arange(len(labels)) + i * width, [results[mode][k] for k in labels], width, label=mode)
+        ax.bar(
+            np.arange(len(labels)) + i * width,
+            [results[mode][k] for k in labels],
+            width,
+            label=mode,
+        )
     ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2, labels)
     ax.set_xlabel("lateral position (cm)")
     ax.set_ylabel("MAE (deg)")
@@ -65,8 +79,11 @@ def mae_per_position(results: dict[str, dict[str, float]], path: str | Path) -> 
     return _save(fig, path)
 
 
-def error_vs_distance(curves: dict[str, tuple[Sequence[float], Sequence[float]]], path: str | Path,
-                      title: str = "Distance estimation error") -> Path:
+def error_vs_distance(
+    curves: dict[str, tuple[Sequence[float], Sequence[float]]],
+    path: str | Path,
+    title: str = "Distance estimation error",
+) -> Path:
     """Fig. 10–11: mean relative error (%) at each distance, one line per model."""
     path = Path(path)
     fig, ax = plt.subplots(figsize=(7, 3.5))
@@ -81,11 +98,18 @@ def error_vs_distance(curves: dict[str, tuple[Sequence[float], Sequence[float]]]
 
 # --- figures of `parallax-report` (several seeds per curve) ---------------------------------------
 
-def mean_sd_curves(curves: dict[str, tuple[Sequence[float], Sequence[float], Sequence[float]]],
-                   path: str | Path, title: str, *, ylabel: str = "MAE (deg)",
-                   xlabel: str = "iterations per robot", perturbation_at: float | None = None,
-                   thin_curves: dict[str, tuple[Sequence[float], Sequence[float]]] | None = None,
-                   log_y: bool = True) -> Path:
+
+def mean_sd_curves(
+    curves: dict[str, tuple[Sequence[float], Sequence[float], Sequence[float]]],
+    path: str | Path,
+    title: str,
+    *,
+    ylabel: str = "MAE (deg)",
+    xlabel: str = "iterations per robot",
+    perturbation_at: float | None = None,
+    thin_curves: dict[str, tuple[Sequence[float], Sequence[float]]] | None = None,
+    log_y: bool = True,
+) -> Path:
     """Fig. 7–9 over seeds: each curve is a mean (solid) with ±1 sd shaded; `thin_curves` (e.g. one
     per lateral position) are drawn as thin lines; a gray dashed line marks the perturbation."""
     path = Path(path)
@@ -114,11 +138,15 @@ def mean_sd_curves(curves: dict[str, tuple[Sequence[float], Sequence[float], Seq
     return _save(fig, path)
 
 
-def error_vs_distance_with_band(lines: dict[str, tuple[Sequence[float], Sequence[float]]], path: str | Path,
-                                title: str = "Distance estimation error", *,
-                                band: tuple[str, Sequence[float], Sequence[float], Sequence[float],
-                                            Sequence[float]] | None = None,
-                                markers: dict[str, tuple[Sequence[float], Sequence[float]]] | None = None) -> Path:
+def error_vs_distance_with_band(
+    lines: dict[str, tuple[Sequence[float], Sequence[float]]],
+    path: str | Path,
+    title: str = "Distance estimation error",
+    *,
+    band: tuple[str, Sequence[float], Sequence[float], Sequence[float], Sequence[float]]
+    | None = None,
+    markers: dict[str, tuple[Sequence[float], Sequence[float]]] | None = None,
+) -> Path:
     """Fig. 10–11: error (%) against distance, one line per model; `band` = (name, d, mean, min,
     max) draws a group of models (the single-position runs) as its mean with dashed min and max,
     as the paper does; `markers` adds points (distances between the grid points)."""
@@ -141,8 +169,12 @@ def error_vs_distance_with_band(lines: dict[str, tuple[Sequence[float], Sequence
     return _save(fig, path)
 
 
-def ablation_bars(labels: Sequence[str], panels: dict[str, tuple[Sequence[float], Sequence[float]]],
-                  path: str | Path, title: str) -> Path:
+def ablation_bars(
+    labels: Sequence[str],
+    panels: dict[str, tuple[Sequence[float], Sequence[float]]],
+    path: str | Path,
+    title: str,
+) -> Path:
     """One panel per quantity (e.g. final MAE, distance error): a bar per setting, mean with an
     sd error bar over seeds; a missing value (NaN) leaves its bar out and says so."""
     path = Path(path)

@@ -25,9 +25,10 @@ import os
 import re
 import statistics
 import sys
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 from hydra.errors import HydraException
@@ -51,10 +52,20 @@ HYDRA_OVERRIDES = Path(".hydra") / "overrides.yaml"
 IGNORED_KEYS = RESULT_NEUTRAL_KEYS | {"seed"}
 
 #: Settings that name an ablation when they vary; listed first, and never folded into another.
-PREFERRED_FACTORS = ("curriculum.name", "curriculum.lateral_positions", "coder.scales", "distance.y",
-                     "distance.queue_size", "distance.weighting", "env.pan_reset", "coder.normalisation",
-                     "policy.feature_norm", "perturbation.camera_rotation_deg", "perturbation.blur_sigma",
-                     "train.presentations")
+PREFERRED_FACTORS = (
+    "curriculum.name",
+    "curriculum.lateral_positions",
+    "coder.scales",
+    "distance.y",
+    "distance.queue_size",
+    "distance.weighting",
+    "env.pan_reset",
+    "coder.normalisation",
+    "policy.feature_norm",
+    "perturbation.camera_rotation_deg",
+    "perturbation.blur_sigma",
+    "train.presentations",
+)
 
 ONLINE_SOURCE = "online, training textures"
 EVAL_SOURCE = "parallax-eval, held-out textures"
@@ -67,6 +78,7 @@ class ReportError(ValueError):
 
 # --- numbers over seeds ----------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class Stat:
     """Mean and sample standard deviation of the finite values among a group's seeds."""
@@ -76,7 +88,7 @@ class Stat:
     n: int
 
     @classmethod
-    def of(cls, values: Iterable[float | None]) -> "Stat":
+    def of(cls, values: Iterable[float | None]) -> Stat:
         finite = [float(v) for v in values if v is not None and math.isfinite(float(v))]
         if not finite:
             return cls(math.nan, math.nan, 0)
@@ -113,6 +125,7 @@ def _json_ready(obj: Any) -> Any:
 
 # --- runs -----------------------------------------------------------------------------------------
 
+
 def _load_yaml(path: Path) -> Any:
     """A YAML file as plain containers, read the way OmegaConf wrote it ('???' stays a string)."""
     return OmegaConf.to_container(OmegaConf.load(path), resolve=False)
@@ -131,7 +144,7 @@ class Run:
     summary: dict | None = None
     evals: list[dict] = field(default_factory=list)
     overrides: list[str] = field(default_factory=list)
-    problem: str | None = None   # set for failed or unfinished jobs
+    problem: str | None = None  # set for failed or unfinished jobs
 
     @property
     def flat(self) -> dict[str, Any]:
@@ -171,8 +184,12 @@ class Run:
     def eval_for(self, phase: str) -> dict | None:
         start = self.perturbation_start
         if phase == "before":
-            fits = [e for e in self.evals if not e.get("perturbed")
-                    and (start is None or int(e.get("presentations", 0)) <= start)]
+            fits = [
+                e
+                for e in self.evals
+                if not e.get("perturbed")
+                and (start is None or int(e.get("presentations", 0)) <= start)
+            ]
         elif start is None:
             return None  # never trained under the perturbation: no "after" model
         else:
@@ -184,8 +201,12 @@ class Run:
         if self.summary is None:
             return None
         ended_perturbed = self.summary.get("before_perturbation") is not None
-        fits = [e for e in self.evals if bool(e.get("perturbed")) == ended_perturbed
-                and int(e.get("presentations", -1)) == int(self.summary.get("presentations", -2))]
+        fits = [
+            e
+            for e in self.evals
+            if bool(e.get("perturbed")) == ended_perturbed
+            and int(e.get("presentations", -1)) == int(self.summary.get("presentations", -2))
+        ]
         return fits[0] if fits else None
 
     def online_distance(self, phase: str) -> dict | None:
@@ -195,7 +216,11 @@ class Run:
         if phase == "before":
             if before is not None:
                 return before.get("distance_error") or {}
-            return (self.summary.get("distance_error") or {}) if self.perturbation_start is None else None
+            return (
+                (self.summary.get("distance_error") or {})
+                if self.perturbation_start is None
+                else None
+            )
         return (self.summary.get("distance_error") or {}) if before is not None else None
 
 
@@ -221,8 +246,10 @@ def find_run_dirs(path: str | Path) -> list[Path]:
             found.append(here)
             dirnames[:] = []
     if not found:
-        raise ReportError(f"{path} is not a run or multirun directory: no {RUN_CONFIG_NAME} "
-                          f"(or {HYDRA_CONFIG}) in it or below it")
+        raise ReportError(
+            f"{path} is not a run or multirun directory: no {RUN_CONFIG_NAME} "
+            f"(or {HYDRA_CONFIG}) in it or below it"
+        )
     return found
 
 
@@ -245,7 +272,9 @@ def _progress(path: Path, total: int | None) -> str:
 def eval_files(path: Path) -> list[Path]:
     """eval.json in the run directory and one level below (parallax-eval --out RUN/SUBDIR)."""
     files = [path / EVAL_NAME] if (path / EVAL_NAME).is_file() else []
-    for sub in sorted(p for p in path.iterdir() if p.is_dir() and not p.name.startswith(".") and p.name != "tb"):
+    for sub in sorted(
+        p for p in path.iterdir() if p.is_dir() and not p.name.startswith(".") and p.name != "tb"
+    ):
         if (sub / EVAL_NAME).is_file():
             files.append(sub / EVAL_NAME)
     return files
@@ -264,7 +293,12 @@ def load_run(path: Path) -> Run:
     try:
         config = _load_yaml(config_path)
     except (YAMLError, OmegaConfBaseException) as exc:
-        return Run(path, {}, overrides=overrides, problem=f"unreadable {config_path.name}: {str(exc).splitlines()[0]}")
+        return Run(
+            path,
+            {},
+            overrides=overrides,
+            problem=f"unreadable {config_path.name}: {str(exc).splitlines()[0]}",
+        )
     if not isinstance(config, dict):
         return Run(path, {}, overrides=overrides, problem=f"{config_path} is not a mapping")
     run = Run(path, config, overrides=overrides)
@@ -273,7 +307,9 @@ def load_run(path: Path) -> Run:
         return run
     summary_path = path / SUMMARY_NAME
     if not summary_path.is_file():
-        run.problem = f"failed or unfinished: no {SUMMARY_NAME}; {_progress(path, run.total_presentations)}"
+        run.problem = (
+            f"failed or unfinished: no {SUMMARY_NAME}; {_progress(path, run.total_presentations)}"
+        )
         return run
     try:
         run.summary = _load_json(summary_path)
@@ -296,6 +332,7 @@ def load_run(path: Path) -> Run:
 
 
 # --- groups over seeds -----------------------------------------------------------------------------
+
 
 def _group_key(run: Run) -> tuple:
     return tuple(sorted((k, v) for k, v in run.flat.items() if k not in IGNORED_KEYS))
@@ -339,7 +376,9 @@ class Group:
             return False
         from parallax.distance.weighting import sensitive_positions
 
-        lateral = [float(l) for l in (self.config.get("curriculum") or {}).get("lateral_positions") or []]
+        lateral = [
+            float(l) for l in (self.config.get("curriculum") or {}).get("lateral_positions") or []
+        ]
         sensitivity = distance.get("sensitivity") or {}
         return any(sensitive_positions(lateral, **{k: float(v) for k, v in sensitivity.items()}))
 
@@ -380,6 +419,7 @@ def _sortable(value: Any) -> tuple:
 
 # --- what varies: one ablation table per factor ------------------------------------------------------
 
+
 @dataclass
 class Factor:
     """A setting that varies between groups; `also` are settings that vary with it."""
@@ -401,7 +441,10 @@ def _refines(fine: tuple[int, ...], coarse: tuple[int, ...]) -> bool:
 
 
 def _preference(key: str) -> tuple:
-    return (PREFERRED_FACTORS.index(key) if key in PREFERRED_FACTORS else len(PREFERRED_FACTORS), key)
+    return (
+        PREFERRED_FACTORS.index(key) if key in PREFERRED_FACTORS else len(PREFERRED_FACTORS),
+        key,
+    )
 
 
 def default_flat_config() -> dict[str, Any]:
@@ -426,7 +469,14 @@ def find_factors(groups: Sequence[Group], defaults: dict[str, Any] | None = None
     merged: list[list[str]] = []
     for ks in sorted(classes, key=lambda ks: -len(set(_partition(groups, ks[0])))):
         if ks[0] not in PREFERRED_FACTORS:
-            host = next((m for m in merged if _refines(_partition(groups, m[0]), _partition(groups, ks[0]))), None)
+            host = next(
+                (
+                    m
+                    for m in merged
+                    if _refines(_partition(groups, m[0]), _partition(groups, ks[0]))
+                ),
+                None,
+            )
             if host is not None:
                 host.extend(ks)
                 continue
@@ -457,6 +507,7 @@ def format_value(key: str, value: Any) -> str:
 
 def label_groups(groups: list[Group], factors: Sequence[Factor]) -> None:
     """Sort groups (by lateral list, then by the varying settings) and name them g01, g02, …"""
+
     def order(g: Group) -> tuple:
         lateral = [float(l) for l in g.lateral_labels]
         return (len(lateral), lateral, tuple(_sortable(g.flat.get(f.key)) for f in factors))
@@ -465,10 +516,13 @@ def label_groups(groups: list[Group], factors: Sequence[Factor]) -> None:
     for i, g in enumerate(groups, 1):
         g.gid = f"g{i:02d}"
         g.settings = {f.key: g.flat.get(f.key) for f in factors}
-        g.label = ", ".join(f"{k}={format_value(k, v)}" for k, v in g.settings.items()) or "all runs"
+        g.label = (
+            ", ".join(f"{k}={format_value(k, v)}" for k, v in g.settings.items()) or "all runs"
+        )
 
 
 # --- Markdown helpers ----------------------------------------------------------------------------
+
 
 def md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     def cell(text: str) -> str:
@@ -495,12 +549,13 @@ def _relpath(path: Path | str) -> str:
 
 # --- the paper's tables ---------------------------------------------------------------------------
 
+
 @dataclass
 class PaperSelection:
     """Which group fills which column/row of the paper's tables, and the notes about the choice."""
 
-    columns: dict[tuple[str, str], Group]     # (Table 2–3 column, position) -> group
-    rows: dict[str, Group]                     # Table 4–5 row -> group
+    columns: dict[tuple[str, str], Group]  # (Table 2–3 column, position) -> group
+    rows: dict[str, Group]  # Table 4–5 row -> group
     notes: list[str]
 
     @property
@@ -527,54 +582,100 @@ def _matches(group: Group, preferences: dict[str, Any]) -> int:
     return sum(key in group.flat and group.flat[key] == value for key, value in preferences.items())
 
 
-def _pick(candidates: list[Group], what: str, notes: list[str], prefer_weighting: bool = True,
-          preferences: dict[str, Any] | None = None) -> Group | None:
+def _pick(
+    candidates: list[Group],
+    what: str,
+    notes: list[str],
+    prefer_weighting: bool = True,
+    preferences: dict[str, Any] | None = None,
+) -> Group | None:
     """One group for a table cell: the most preferred settings (``--prefer``), then the most
     seeds, then the preferred weighting; the others noted."""
     if not candidates:
         return None
     preferences = preferences or {}
-    ranked = sorted(candidates, key=lambda g: (-_matches(g, preferences), -g.n,
-                                               g.weighting_effective != prefer_weighting, g.gid))
+    ranked = sorted(
+        candidates,
+        key=lambda g: (
+            -_matches(g, preferences),
+            -g.n,
+            g.weighting_effective != prefer_weighting,
+            g.gid,
+        ),
+    )
     if len(ranked) > 1:
         others = ", ".join(f"{g.gid} ({g.label})" for g in ranked[1:])
-        why = ("the one with the most of the settings asked for (--prefer)"
-               if _matches(ranked[0], preferences) > _matches(ranked[1], preferences) else "the one with the most seeds")
-        notes.append(f"{what}: {len(ranked)} groups fit; shown {ranked[0].gid} ({ranked[0].label}), "
-                     f"{why}; not shown: {others}.")
+        why = (
+            "the one with the most of the settings asked for (--prefer)"
+            if _matches(ranked[0], preferences) > _matches(ranked[1], preferences)
+            else "the one with the most seeds"
+        )
+        notes.append(
+            f"{what}: {len(ranked)} groups fit; shown {ranked[0].gid} ({ranked[0].label}), "
+            f"{why}; not shown: {others}."
+        )
     return ranked[0]
 
 
-def select_paper_groups(groups: Sequence[Group], preferences: dict[str, Any] | None = None) -> PaperSelection:
+def select_paper_groups(
+    groups: Sequence[Group], preferences: dict[str, Any] | None = None
+) -> PaperSelection:
     """Match groups to the paper's columns and rows by their lateral list L and weighting;
     where several fit, ``preferences`` ({setting: value}) decide first."""
     preferences = preferences or {}
-    unknown = [f"{key}={value!r}" for key, value in preferences.items()
-               if not any(g.flat.get(key, object()) == value for g in groups)]
+    unknown = [
+        f"{key}={value!r}"
+        for key, value in preferences.items()
+        if not any(g.flat.get(key, object()) == value for g in groups)
+    ]
     if groups and unknown:
         raise ReportError(f"--prefer {', '.join(unknown)}: no group of runs has that setting")
     notes: list[str] = []
     columns: dict[tuple[str, str], Group] = {}
     for position in paper.TABLE_POSITIONS_CM:
-        chosen = _pick([g for g in groups if g.lateral_labels == [position]],
-                       f"Tables 2–3, {paper.SINGLE} {position} cm", notes, preferences=preferences)
+        chosen = _pick(
+            [g for g in groups if g.lateral_labels == [position]],
+            f"Tables 2–3, {paper.SINGLE} {position} cm",
+            notes,
+            preferences=preferences,
+        )
         if chosen is not None:
             columns[(paper.SINGLE, position)] = chosen
     for column, labels in paper.MULTI_LISTS_CM.items():
-        chosen = _pick([g for g in groups if tuple(g.lateral_labels) == labels], f"Tables 2–3, {column}", notes,
-                       preferences=preferences)
+        chosen = _pick(
+            [g for g in groups if tuple(g.lateral_labels) == labels],
+            f"Tables 2–3, {column}",
+            notes,
+            preferences=preferences,
+        )
         if chosen is not None:
             for position in paper.TABLE_POSITIONS_CM:
                 if position in labels:
                     columns[(column, position)] = chosen
     rows: dict[str, Group] = {}
     for row, (labels, weighted) in paper.DISTANCE_ROWS.items():
-        fits = [g for g in groups if tuple(g.lateral_labels) == labels and g.weighting_effective == weighted]
+        fits = [
+            g
+            for g in groups
+            if tuple(g.lateral_labels) == labels and g.weighting_effective == weighted
+        ]
         # a group whose queue never filled has no distance error: prefer one that has
-        measured = [g for g in fits if any(_total(r.online_distance("before")) is not None
-                                           or _total(r.summary.get("distance_error")) is not None for r in g.runs)]
-        chosen = _pick(measured or fits, f"Tables 4–5, {row}", notes, prefer_weighting=weighted,
-                       preferences=preferences)
+        measured = [
+            g
+            for g in fits
+            if any(
+                _total(r.online_distance("before")) is not None
+                or _total(r.summary.get("distance_error")) is not None
+                for r in g.runs
+            )
+        ]
+        chosen = _pick(
+            measured or fits,
+            f"Tables 4–5, {row}",
+            notes,
+            prefer_weighting=weighted,
+            preferences=preferences,
+        )
         if chosen is not None:
             rows[row] = chosen
     return PaperSelection(columns, rows, notes)
@@ -616,23 +717,37 @@ def eye_movement_table(selection: PaperSelection, phase: str) -> tuple[str, dict
                     met += round(cell["mean"].mean, 2) <= theirs[0]
             row += [ours_text, f"{theirs[0]:.2f} ({theirs[1]:.2f})" if theirs else "-"]
             data.setdefault(column, {})[position] = {
-                "ours": None if cell is None else {"mean": cell["mean"].as_dict(),
-                                                   "var_mean": _finite_or_none(cell["var"].mean),
-                                                   "group": cell["group"]},
-                "paper": None if theirs is None else {"mean": theirs[0], "var": theirs[1]}}
+                "ours": None
+                if cell is None
+                else {
+                    "mean": cell["mean"].as_dict(),
+                    "var_mean": _finite_or_none(cell["var"].mean),
+                    "group": cell["group"],
+                },
+                "paper": None if theirs is None else {"mean": theirs[0], "var": theirs[1]},
+            }
         rows.append(row)
     number = 2 if phase == "before" else 3
-    what = ("before the perturbation (or at the end of runs without one)" if phase == "before"
-            else "after the perturbation (left camera rotated 15°, blur σ = 2), training continued")
-    text = [f"**Table {number}** — eye-movement error of the last 100 trials (deg), {what}. "
-            "Ours: mean ± sd over seeds of each run's last-100-trial average, (mean variance), n seeds; "
-            "paper: average (variance). ✓: ours ≤ paper at the paper's two decimals.", "",
-            md_table(header, rows), "",
-            f"Ours at or below the paper in {met} of {compared} cells with both numbers."]
+    what = (
+        "before the perturbation (or at the end of runs without one)"
+        if phase == "before"
+        else "after the perturbation (left camera rotated 15°, blur σ = 2), training continued"
+    )
+    text = [
+        f"**Table {number}** — eye-movement error of the last 100 trials (deg), {what}. "
+        "Ours: mean ± sd over seeds of each run's last-100-trial average, (mean variance), n seeds; "
+        "paper: average (variance). ✓: ours ≤ paper at the paper's two decimals.",
+        "",
+        md_table(header, rows),
+        "",
+        f"Ours at or below the paper in {met} of {compared} cells with both numbers.",
+    ]
     return "\n".join(text), {"cells": data, "at_or_below_paper": met, "compared": compared}
 
 
-def _distance_values(group: Group, phase: str, use_eval: bool = True) -> tuple[list[dict], str] | None:
+def _distance_values(
+    group: Group, phase: str, use_eval: bool = True
+) -> tuple[list[dict], str] | None:
     """Per-seed errors by range for a phase: parallax-eval's when every seed has one (and
     ``use_eval``), else online."""
     evals = [r.eval_for(phase) for r in group.runs]
@@ -647,22 +762,34 @@ def _distance_values(group: Group, phase: str, use_eval: bool = True) -> tuple[l
 def distance_table(selection: PaperSelection, phase: str) -> tuple[str, dict]:
     """Table 4 (before) or Table 5 (after): distance error per range, ours (paper)."""
     published = paper.TABLE4 if phase == "before" else paper.TABLE5
-    header = ["Simulation", "group", "n"] + [paper.DISTANCE_RANGE_TITLES[r] for r in paper.DISTANCE_RANGES] + ["source"]
+    header = (
+        ["Simulation", "group", "n"]
+        + [paper.DISTANCE_RANGE_TITLES[r] for r in paper.DISTANCE_RANGES]
+        + ["source"]
+    )
     rows, data, met, compared = [], {}, 0, 0
     totals: dict[str, Stat] = {}
     # One source for every row, so that rows compare like with like: a frozen model on held-out
     # textures is far better than the online error during training (a learner replayed by
     # parallax-replay has only the latter).
     # Rows with no distance error at all (a queue that never filled) do not count.
-    found = [v for v in (_distance_values(g, phase) for g in selection.rows.values()) if v is not None]
-    use_eval = all(source == EVAL_SOURCE for per_seed, source in found
-                   if any(_total(by_range) is not None for by_range in per_seed))
+    found = [
+        v for v in (_distance_values(g, phase) for g in selection.rows.values()) if v is not None
+    ]
+    use_eval = all(
+        source == EVAL_SOURCE
+        for per_seed, source in found
+        if any(_total(by_range) is not None for by_range in per_seed)
+    )
     for row_name, theirs in published.items():
         group = selection.rows.get(row_name)
         values = _distance_values(group, phase, use_eval) if group is not None else None
         if values is None:
-            rows.append([row_name, group.gid if group else "not run", "0"]
-                        + [f"— ({theirs[r]:.2f})" for r in paper.DISTANCE_RANGES] + ["—"])
+            rows.append(
+                [row_name, group.gid if group else "not run", "0"]
+                + [f"— ({theirs[r]:.2f})" for r in paper.DISTANCE_RANGES]
+                + ["—"]
+            )
             data[row_name] = {"ours": None, "paper": theirs}
             continue
         per_seed, source = values
@@ -682,22 +809,30 @@ def distance_table(selection: PaperSelection, phase: str) -> tuple[str, dict]:
         data[row_name] = {"ours": ours, "paper": theirs, "source": source, "group": group.gid}
     number = 4 if phase == "before" else 5
     what = "before the perturbation" if phase == "before" else "after the perturbation"
-    lines = [f"**Table {number}** — average distance-estimation error (%) per range of distances, {what}. "
-             "Cells: ours mean ± sd over seeds (paper); ✓: ours ≤ paper at two decimals. "
-             f"Source: `{EVAL_SOURCE}` = frozen model on held-out photographs at the distances parallax-eval "
-             "was given (by default 3.0, 3.1, …, 10.0 m; see the notes for this report's); "
-             f"`{ONLINE_SOURCE}` = the trainer's predictions of each new s before learning it "
-             "(last 500), used for every row when any row has no matching eval.json.", "",
-             md_table(header, rows), "", f"Ours at or below the paper in {met} of {compared} cells."]
+    lines = [
+        f"**Table {number}** — average distance-estimation error (%) per range of distances, {what}. "
+        "Cells: ours mean ± sd over seeds (paper); ✓: ours ≤ paper at two decimals. "
+        f"Source: `{EVAL_SOURCE}` = frozen model on held-out photographs at the distances parallax-eval "
+        "was given (by default 3.0, 3.1, …, 10.0 m; see the notes for this report's); "
+        f"`{ONLINE_SOURCE}` = the trainer's predictions of each new s before learning it "
+        "(last 500), used for every row when any row has no matching eval.json.",
+        "",
+        md_table(header, rows),
+        "",
+        f"Ours at or below the paper in {met} of {compared} cells.",
+    ]
     weighted, unweighted = totals.get(paper.WEIGHTING_5_20), totals.get(paper.NO_WEIGHTING_5_20)
     if weighted and unweighted and weighted.n and unweighted.n:
         verdict = "better than" if weighted.mean < unweighted.mean else "not better than"
-        lines.append(f"5–20 cm with weighting ({weighted.mean:.2f} %) is {verdict} without weighting "
-                     f"({unweighted.mean:.2f} %) in total.")
+        lines.append(
+            f"5–20 cm with weighting ({weighted.mean:.2f} %) is {verdict} without weighting "
+            f"({unweighted.mean:.2f} %) in total."
+        )
     return "\n".join(lines), {"rows": data, "at_or_below_paper": met, "compared": compared}
 
 
 # --- beyond the paper: held-out textures, distances between the grid points --------------------
+
 
 def _total(by_range: dict | None) -> float | None:
     return (by_range or {}).get("total")
@@ -720,31 +855,65 @@ def generalisation_table(groups: Sequence[Group]) -> tuple[str, list[dict]] | No
         with_eval = [(r, e) for r, e in zip(g.runs, finals) if e is not None]
         online = Stat.of(_total(r.summary.get("distance_error")) for r, _ in with_eval)
         grid = Stat.of(_total((e.get("distance") or {}).get("by_range")) for _, e in with_eval)
-        between = Stat.of(_total((e.get("distance_between_grid") or {}).get("by_range")) for _, e in with_eval)
+        between = Stat.of(
+            _total((e.get("distance_between_grid") or {}).get("by_range")) for _, e in with_eval
+        )
         gap = Stat.of(_between_minus_grid(e) for _, e in with_eval)
         train_mae = Stat.of(r.summary.get("mae") for r, _ in with_eval)
         greedy = Stat.of((e.get("mae") or {}).get("greedy") for _, e in with_eval)
         sampled = Stat.of((e.get("mae") or {}).get("sampled") for _, e in with_eval)
-        rows.append([g.gid, g.label, str(len(with_eval)), online.text(), grid.text(), between.text(), gap.text(),
-                     train_mae.text(3), greedy.text(3), sampled.text(3)])
-        data.append({"group": g.gid, "n": len(with_eval), "distance_total_online": online.as_dict(),
-                     "distance_total_heldout_grid": grid.as_dict(),
-                     "distance_total_between_grid": between.as_dict(), "between_minus_grid": gap.as_dict(),
-                     "mae_training_window": train_mae.as_dict(), "mae_eval_greedy": greedy.as_dict(),
-                     "mae_eval_sampled": sampled.as_dict()})
+        rows.append(
+            [
+                g.gid,
+                g.label,
+                str(len(with_eval)),
+                online.text(),
+                grid.text(),
+                between.text(),
+                gap.text(),
+                train_mae.text(3),
+                greedy.text(3),
+                sampled.text(3),
+            ]
+        )
+        data.append(
+            {
+                "group": g.gid,
+                "n": len(with_eval),
+                "distance_total_online": online.as_dict(),
+                "distance_total_heldout_grid": grid.as_dict(),
+                "distance_total_between_grid": between.as_dict(),
+                "between_minus_grid": gap.as_dict(),
+                "mae_training_window": train_mae.as_dict(),
+                "mae_eval_greedy": greedy.as_dict(),
+                "mae_eval_sampled": sampled.as_dict(),
+            }
+        )
     if not rows:
         return None
-    header = ["group", "settings", "n", "dist. % online (training textures)", "dist. % held-out, grid",
-              "dist. % held-out, between grid", "between − grid", "MAE training (window)", "MAE eval greedy",
-              "MAE eval sampled"]
-    text = ("**Beyond the paper** — the final model, frozen (`parallax-eval`), on photographs never seen "
-            "in training, at the grid distances and between them (e.g. 3.05, 7.33 m); total distance "
-            "error in %, eye-movement MAE in degrees; mean ± sd over seeds with an eval.json.\n\n"
-            + md_table(header, rows))
+    header = [
+        "group",
+        "settings",
+        "n",
+        "dist. % online (training textures)",
+        "dist. % held-out, grid",
+        "dist. % held-out, between grid",
+        "between − grid",
+        "MAE training (window)",
+        "MAE eval greedy",
+        "MAE eval sampled",
+    ]
+    text = (
+        "**Beyond the paper** — the final model, frozen (`parallax-eval`), on photographs never seen "
+        "in training, at the grid distances and between them (e.g. 3.05, 7.33 m); total distance "
+        "error in %, eye-movement MAE in degrees; mean ± sd over seeds with an eval.json.\n\n"
+        + md_table(header, rows)
+    )
     return text, data
 
 
 # --- ablations ----------------------------------------------------------------------------------
+
 
 def _positions_of(groups: Sequence[Group]) -> list[str]:
     labels = {l for g in groups for l in g.lateral_labels}
@@ -759,7 +928,9 @@ def _final_distance(group: Group) -> tuple[list[dict], str]:
     return [r.summary.get("distance_error") or {} for r in group.runs], ONLINE_SOURCE
 
 
-def ablation_rows(factor: Factor, factors: Sequence[Factor], groups: Sequence[Group]) -> list[Group]:
+def ablation_rows(
+    factor: Factor, factors: Sequence[Factor], groups: Sequence[Group]
+) -> list[Group]:
     """The groups that differ from the baseline in this factor alone (the baseline included)."""
     others = [f for f in factors if f is not factor]
     # in the groups' order (lateral list first), so single_5 comes before single_10
@@ -769,8 +940,12 @@ def ablation_rows(factor: Factor, factors: Sequence[Factor], groups: Sequence[Gr
 def ablation_table(factor: Factor, rows: Sequence[Group]) -> tuple[str, dict]:
     """One ablation: a row per value of the factor, MAE per position and distance per range."""
     positions = _positions_of(rows)
-    header = [factor.key, "group", "n", "MAE all"] + [f"last-100 {p} cm" for p in positions] \
-        + [f"dist. {r} m" if r != "total" else "dist. total" for r in paper.DISTANCE_RANGES] + ["distance source"]
+    header = (
+        [factor.key, "group", "n", "MAE all"]
+        + [f"last-100 {p} cm" for p in positions]
+        + [f"dist. {r} m" if r != "total" else "dist. total" for r in paper.DISTANCE_RANGES]
+        + ["distance source"]
+    )
     table_rows, data = [], []
     for g in rows:
         value = format_value(factor.key, g.flat.get(factor.key))
@@ -779,24 +954,48 @@ def ablation_table(factor: Factor, rows: Sequence[Group]) -> tuple[str, dict]:
         mae = g.stat(lambda r: r.summary.get("mae"))
         # Tables 2–3's measure per position: the mean of its last 100 trials (the sliding window of
         # eq. 16 still holds the early trials of a short run).
-        per_position = {p: g.stat(lambda r, p=p: ((r.summary.get("last_trials") or {}).get(p) or {}).get("mean"))
-                        for p in positions}
+        per_position = {
+            p: g.stat(
+                lambda r, p=p: ((r.summary.get("last_trials") or {}).get(p) or {}).get("mean")
+            )
+            for p in positions
+        }
         per_seed, source = _final_distance(g)
         distance = {r: Stat.of(v.get(r) for v in per_seed) for r in paper.DISTANCE_RANGES}
-        table_rows.append([value, g.gid, str(g.n), mae.text(3)] + [per_position[p].text(3) for p in positions]
-                          + [distance[r].text() for r in paper.DISTANCE_RANGES] + [source])
-        data.append({"group": g.gid, "value": _json_ready(g.flat.get(factor.key)), "n": g.n,
-                     "mae": mae.as_dict(), "last100_per_position": {p: s.as_dict() for p, s in per_position.items()},
-                     "distance": {r: s.as_dict() for r, s in distance.items()}, "distance_source": source})
+        table_rows.append(
+            [value, g.gid, str(g.n), mae.text(3)]
+            + [per_position[p].text(3) for p in positions]
+            + [distance[r].text() for r in paper.DISTANCE_RANGES]
+            + [source]
+        )
+        data.append(
+            {
+                "group": g.gid,
+                "value": _json_ready(g.flat.get(factor.key)),
+                "n": g.n,
+                "mae": mae.as_dict(),
+                "last100_per_position": {p: s.as_dict() for p, s in per_position.items()},
+                "distance": {r: s.as_dict() for r, s in distance.items()},
+                "distance_source": source,
+            }
+        )
     also = f" (varies together with {', '.join(factor.also)})" if factor.also else ""
-    text = (f"**Ablation: `{factor.key}`**{also} — final sliding-window MAE (eq. 16, deg), the eye-movement "
-            "error of the last 100 trials at each lateral position (deg, as in Table 2) and the distance "
-            "error (%) per range, mean ± sd over seeds; every other varying setting at its "
-            f"baseline.\n\n" + md_table(header, table_rows))
-    return text, {"factor": factor.key, "also": factor.also, "baseline": _json_ready(factor.baseline), "rows": data}
+    text = (
+        f"**Ablation: `{factor.key}`**{also} — final sliding-window MAE (eq. 16, deg), the eye-movement "
+        "error of the last 100 trials at each lateral position (deg, as in Table 2) and the distance "
+        "error (%) per range, mean ± sd over seeds; every other varying setting at its "
+        f"baseline.\n\n" + md_table(header, table_rows)
+    )
+    return text, {
+        "factor": factor.key,
+        "also": factor.also,
+        "baseline": _json_ready(factor.baseline),
+        "rows": data,
+    }
 
 
 # --- curves and figures -----------------------------------------------------------------------------
+
 
 @dataclass
 class Curves:
@@ -832,11 +1031,21 @@ def group_curves(group: Group) -> Curves | None:
     mae = np.array([[rec["mae"] for rec in r] for r in records], dtype=float)
     sd = mae.std(axis=0, ddof=1) if len(records) >= 2 else np.zeros(length)
     positions = list(records[0][-1].get("mae_per_position", {}))
-    per_position = {p: np.nanmean(np.array([[rec["mae_per_position"].get(p, np.nan) for rec in r]
-                                            for r in records], dtype=float), axis=0) for p in positions}
+    per_position = {
+        p: np.nanmean(
+            np.array(
+                [[rec["mae_per_position"].get(p, np.nan) for rec in r] for r in records],
+                dtype=float,
+            ),
+            axis=0,
+        )
+        for p in positions
+    }
     switches = [next((rec["steps"] for rec in r if rec.get("perturbed")), None) for r in records]
     switches = [s for s in switches if s is not None]
-    return Curves(steps, mae.mean(axis=0), sd, per_position, float(np.mean(switches)) if switches else None)
+    return Curves(
+        steps, mae.mean(axis=0), sd, per_position, float(np.mean(switches)) if switches else None
+    )
 
 
 def _per_distance(results: Sequence[dict], key: str) -> tuple[list[float], np.ndarray] | None:
@@ -847,7 +1056,9 @@ def _per_distance(results: Sequence[dict], key: str) -> tuple[list[float], np.nd
     common = sorted(set.intersection(*(set(t) for t in tables)), key=float)
     if not common:
         return None
-    return [float(d) for d in common], np.array([[t[d] for d in common] for t in tables], dtype=float).mean(axis=0)
+    return [float(d) for d in common], np.array(
+        [[t[d] for d in common] for t in tables], dtype=float
+    ).mean(axis=0)
 
 
 class Figures:
@@ -878,13 +1089,19 @@ def figure_mae_curves(figures: Figures, group: Group, curves: Curves) -> str | N
     if path is None:
         return None
     thin = {f"{p} cm": (curves.steps, v) for p, v in curves.per_position.items()}
-    plots.mean_sd_curves({f"all positions (mean ± sd, n={group.n})": (curves.steps, curves.mae_mean, curves.mae_sd)},
-                         path, f"{group.gid}: {group.label}", perturbation_at=curves.perturbation_at,
-                         thin_curves=thin if len(thin) > 1 else None)
+    plots.mean_sd_curves(
+        {f"all positions (mean ± sd, n={group.n})": (curves.steps, curves.mae_mean, curves.mae_sd)},
+        path,
+        f"{group.gid}: {group.label}",
+        perturbation_at=curves.perturbation_at,
+        thin_curves=thin if len(thin) > 1 else None,
+    )
     return path.name
 
 
-def figure_distance(figures: Figures, selection: PaperSelection, groups: Sequence[Group], phase: str) -> str | None:
+def figure_distance(
+    figures: Figures, selection: PaperSelection, groups: Sequence[Group], phase: str
+) -> str | None:
     """Fig. 10 (before) / Fig. 11 (after): single-position runs as mean with min/max, the others as lines."""
     from parallax import plots
 
@@ -894,13 +1111,20 @@ def figure_distance(figures: Figures, selection: PaperSelection, groups: Sequenc
         found = [r.eval_for(phase) for r in g.runs]
         return found if all(e is not None for e in found) else None
 
-    single_curves = [c for c in (_per_distance(evals(g) or [], "distance") for g in singles) if c is not None]
+    single_curves = [
+        c for c in (_per_distance(evals(g) or [], "distance") for g in singles) if c is not None
+    ]
     band = None
     common = sorted(set.intersection(*(set(d) for d, _ in single_curves))) if single_curves else []
     if common:
         stacked = np.array([[dict(zip(d, e))[x] for x in common] for d, e in single_curves])
-        band = (f"single positions ({len(single_curves)})", common, stacked.mean(axis=0), stacked.min(axis=0),
-                stacked.max(axis=0))
+        band = (
+            f"single positions ({len(single_curves)})",
+            common,
+            stacked.mean(axis=0),
+            stacked.min(axis=0),
+            stacked.max(axis=0),
+        )
     lines, markers = {}, {}
     for name, g in selection.rows.items():
         found = evals(g)
@@ -917,14 +1141,18 @@ def figure_distance(figures: Figures, selection: PaperSelection, groups: Sequenc
     path = figures.path(f"distance_{phase}")
     if path is None:
         return None
-    title = ("Distance estimation error (Fig. 10)" if phase == "before"
-             else "Distance estimation error after the perturbation (Fig. 11)")
+    title = (
+        "Distance estimation error (Fig. 10)"
+        if phase == "before"
+        else "Distance estimation error after the perturbation (Fig. 11)"
+    )
     plots.error_vs_distance_with_band(lines, path, title, band=band, markers=markers)
     return path.name
 
 
-def figure_ablation(figures: Figures, factor: Factor, rows: Sequence[Group],
-                    curves: dict[str, Curves | None]) -> list[str]:
+def figure_ablation(
+    figures: Figures, factor: Factor, rows: Sequence[Group], curves: dict[str, Curves | None]
+) -> list[str]:
     """The bar plot of one ablation (final MAE, total distance error) and its MAE curves overlaid."""
     from parallax import plots
 
@@ -937,13 +1165,21 @@ def figure_ablation(figures: Figures, factor: Factor, rows: Sequence[Group],
         distance.append(Stat.of(v.get("total") for v in per_seed))
     path = figures.path(f"ablation_{_slug(factor.key)}")
     if path is not None:
-        plots.ablation_bars(labels, {"final MAE (deg)": ([s.mean for s in mae], [s.sd for s in mae]),
-                                     "distance error, total (%)": ([s.mean for s in distance],
-                                                                   [s.sd for s in distance])},
-                            path, f"Ablation: {factor.key}")
+        plots.ablation_bars(
+            labels,
+            {
+                "final MAE (deg)": ([s.mean for s in mae], [s.sd for s in mae]),
+                "distance error, total (%)": ([s.mean for s in distance], [s.sd for s in distance]),
+            },
+            path,
+            f"Ablation: {factor.key}",
+        )
         names.append(path.name)
-    overlay = {f"{label} (n={g.n})": (c.steps, c.mae_mean, c.mae_sd)
-               for label, g in zip(labels, rows) if (c := curves.get(g.gid)) is not None}
+    overlay = {
+        f"{label} (n={g.n})": (c.steps, c.mae_mean, c.mae_sd)
+        for label, g in zip(labels, rows)
+        if (c := curves.get(g.gid)) is not None
+    }
     if overlay:
         path = figures.path(f"ablation_{_slug(factor.key)}_mae")
         if path is not None:
@@ -954,10 +1190,22 @@ def figure_ablation(figures: Figures, factor: Factor, rows: Sequence[Group],
 
 # --- the report -------------------------------------------------------------------------------
 
+
 def overview_table(groups: Sequence[Group]) -> str:
     """Every group with its budget (issue 8 asks for it): presentations, iterations, wall time."""
-    header = ["group", "settings", "n", "seeds", "presentations", "iterations per robot", "wall time per run",
-              "steps/s", "final MAE (deg)", "dist. total (%)", "distance source"]
+    header = [
+        "group",
+        "settings",
+        "n",
+        "seeds",
+        "presentations",
+        "iterations per robot",
+        "wall time per run",
+        "steps/s",
+        "final MAE (deg)",
+        "dist. total (%)",
+        "distance source",
+    ]
     rows = []
     for g in groups:
         presentations = sorted({r.summary.get("presentations") for r in g.runs})
@@ -965,33 +1213,62 @@ def overview_table(groups: Sequence[Group]) -> str:
         wall = g.stat(lambda r: (r.summary.get("timing") or {}).get("wall_time_s"))
         speed = g.stat(lambda r: (r.summary.get("timing") or {}).get("steps_per_second"))
         per_seed, source = _final_distance(g)
-        rows.append([g.gid, g.label, str(g.n), ", ".join(str(s) for s in g.seeds),
-                     "/".join(str(p) for p in presentations), "/".join(str(s) for s in steps),
-                     f"{wall.mean / 60:.1f} min" if wall.n else "—", speed.text(0),
-                     g.stat(lambda r: r.summary.get("mae")).text(3),
-                     Stat.of(v.get("total") for v in per_seed).text(), source])
+        rows.append(
+            [
+                g.gid,
+                g.label,
+                str(g.n),
+                ", ".join(str(s) for s in g.seeds),
+                "/".join(str(p) for p in presentations),
+                "/".join(str(s) for s in steps),
+                f"{wall.mean / 60:.1f} min" if wall.n else "—",
+                speed.text(0),
+                g.stat(lambda r: r.summary.get("mae")).text(3),
+                Stat.of(v.get("total") for v in per_seed).text(),
+                source,
+            ]
+        )
     return md_table(header, rows)
 
 
 def _run_record(run: Run) -> dict:
     """What results.json keeps of one run: the numbers the tables are made from."""
     summary = run.summary or {}
-    return {"dir": _relpath(run.path), "seed": run.seed, "presentations": summary.get("presentations"),
-            "steps": summary.get("steps"), "wall_time_s": (summary.get("timing") or {}).get("wall_time_s"),
-            "mae": summary.get("mae"), "mae_per_position": summary.get("mae_per_position"),
-            "last_trials_before": run.last_trials("before"), "last_trials_after": run.last_trials("after"),
-            "distance_online_before": run.online_distance("before"),
-            "distance_online_after": run.online_distance("after"),
-            "evals": [{"file": _relpath(e["_path"]), "presentations": e.get("presentations"),
-                       "perturbed": e.get("perturbed"),
-                       "distance_by_range": (e.get("distance") or {}).get("by_range"),
-                       "between_grid_by_range": (e.get("distance_between_grid") or {}).get("by_range"),
-                       "mae": e.get("mae")} for e in run.evals]}
+    return {
+        "dir": _relpath(run.path),
+        "seed": run.seed,
+        "presentations": summary.get("presentations"),
+        "steps": summary.get("steps"),
+        "wall_time_s": (summary.get("timing") or {}).get("wall_time_s"),
+        "mae": summary.get("mae"),
+        "mae_per_position": summary.get("mae_per_position"),
+        "last_trials_before": run.last_trials("before"),
+        "last_trials_after": run.last_trials("after"),
+        "distance_online_before": run.online_distance("before"),
+        "distance_online_after": run.online_distance("after"),
+        "evals": [
+            {
+                "file": _relpath(e["_path"]),
+                "presentations": e.get("presentations"),
+                "perturbed": e.get("perturbed"),
+                "distance_by_range": (e.get("distance") or {}).get("by_range"),
+                "between_grid_by_range": (e.get("distance_between_grid") or {}).get("by_range"),
+                "mae": e.get("mae"),
+            }
+            for e in run.evals
+        ],
+    }
 
 
-def build_report(paths: Sequence[str | Path], out: Path | None = None, name: str = "README.md",
-                 title: str = "parallax results", tables: str = "all", notes: str | None = None,
-                 prefer: Sequence[str] = ()) -> tuple[str, dict]:
+def build_report(
+    paths: Sequence[str | Path],
+    out: Path | None = None,
+    name: str = "README.md",
+    title: str = "parallax results",
+    tables: str = "all",
+    notes: str | None = None,
+    prefer: Sequence[str] = (),
+) -> tuple[str, dict]:
     """Read the runs below `paths`; write Markdown, figures and JSON into `out` (if given).
     ``prefer``: KEY=VALUE settings that decide which group fills a paper table's cell where
     several fit (e.g. two weighted 5–20 cm groups with different y)."""
@@ -1006,8 +1283,11 @@ def build_report(paths: Sequence[str | Path], out: Path | None = None, name: str
         defaults = default_flat_config()
     except (HydraException, OmegaConfBaseException) as exc:
         # a shipped config that no longer composes must not hide the results
-        print(f"parallax-report: warning: cannot compose the default config ({exc}); "
-              "ablation baselines are the most common values", file=sys.stderr)
+        print(
+            f"parallax-report: warning: cannot compose the default config ({exc}); "
+            "ablation baselines are the most common values",
+            file=sys.stderr,
+        )
         defaults = {}
     factors = find_factors(groups, defaults)
     label_groups(groups, factors)
@@ -1016,23 +1296,40 @@ def build_report(paths: Sequence[str | Path], out: Path | None = None, name: str
     figures = Figures(out, "" if stem.lower() == "readme" else f"{stem}_")
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-    results: dict[str, Any] = {"title": title, "inputs": [_relpath(p) for p in paths],
-                               "groups": [], "failed": [], "duplicates": [], "paper": None, "ablations": []}
-    md: list[str] = [f"# {title}", "",
-                     f"Made by `parallax-report` from {len(runs)} job directories in "
-                     + ", ".join(f"`{_relpath(p)}`" for p in paths)
-                     + f": {sum(g.n for g in groups)} finished runs in {len(groups)} groups, "
-                     f"{len(failed)} failed or unfinished, {len(duplicates)} duplicates left out. "
-                     "Numbers are mean ± sample sd over seeds (n seeds).", ""]
+    results: dict[str, Any] = {
+        "title": title,
+        "inputs": [_relpath(p) for p in paths],
+        "groups": [],
+        "failed": [],
+        "duplicates": [],
+        "paper": None,
+        "ablations": [],
+    }
+    md: list[str] = [
+        f"# {title}",
+        "",
+        f"Made by `parallax-report` from {len(runs)} job directories in "
+        + ", ".join(f"`{_relpath(p)}`" for p in paths)
+        + f": {sum(g.n for g in groups)} finished runs in {len(groups)} groups, "
+        f"{len(failed)} failed or unfinished, {len(duplicates)} duplicates left out. "
+        "Numbers are mean ± sample sd over seeds (n seeds).",
+        "",
+    ]
     if notes:
         md += [notes.strip(), ""]
 
     curves = {g.gid: group_curves(g) for g in groups}
     for g in groups:
-        results["groups"].append({
-            "id": g.gid, "label": g.label, "settings": _json_ready(g.settings), "n": g.n,
-            "weighting_effective": g.weighting_effective,
-            "runs": [_run_record(r) for r in g.runs]})
+        results["groups"].append(
+            {
+                "id": g.gid,
+                "label": g.label,
+                "settings": _json_ready(g.settings),
+                "n": g.n,
+                "weighting_effective": g.weighting_effective,
+                "runs": [_run_record(r) for r in g.runs],
+            }
+        )
 
     if groups:
         md += ["## Runs", "", overview_table(groups), ""]
@@ -1050,21 +1347,37 @@ def build_report(paths: Sequence[str | Path], out: Path | None = None, name: str
             md += [text, ""]
             paper_data[key] = data
         if selection.notes:
-            md += ["Choices where several groups fit a cell:", ""] + [f"- {n}" for n in selection.notes] + [""]
+            md += (
+                ["Choices where several groups fit a cell:", ""]
+                + [f"- {n}" for n in selection.notes]
+                + [""]
+            )
         results["paper"] = paper_data
         figure_md = []
-        for number, (phase, caption) in enumerate((("before", "Fig. 10: error against distance"),
-                                                   ("after", "Fig. 11: after the perturbation")), 10):
+        for _number, (phase, caption) in enumerate(
+            (
+                ("before", "Fig. 10: error against distance"),
+                ("after", "Fig. 11: after the perturbation"),
+            ),
+            10,
+        ):
             name_png = figure_distance(figures, selection, groups, phase)
             if name_png:
                 figure_md.append(f"![{caption}]({name_png})")
         if out is not None and not figure_md:
-            figure_md.append("(No Fig. 10–11: no run has an eval.json for that phase; run `parallax-eval RUN`.)")
+            figure_md.append(
+                "(No Fig. 10–11: no run has an eval.json for that phase; run `parallax-eval RUN`.)"
+            )
         md += figure_md + [""]
 
     generalisation = generalisation_table(groups)
     if generalisation is not None and tables in ("all", "paper"):
-        md += ["## Held-out textures and distances between the grid points", "", generalisation[0], ""]
+        md += [
+            "## Held-out textures and distances between the grid points",
+            "",
+            generalisation[0],
+            "",
+        ]
         results["generalisation"] = generalisation[1]
 
     if tables in ("all", "ablation") and factors:
@@ -1083,13 +1396,21 @@ def build_report(paths: Sequence[str | Path], out: Path | None = None, name: str
             results["ablations"].append(data)
         left_out = [g for g in groups if g.gid not in in_a_table]
         if left_out:
-            md += ["Groups that differ from the baselines in more than one setting (in the Runs table only): "
-                   + "; ".join(f"{g.gid} ({g.label})" for g in left_out) + ".", ""]
+            md += [
+                "Groups that differ from the baselines in more than one setting (in the Runs table only): "
+                + "; ".join(f"{g.gid} ({g.label})" for g in left_out)
+                + ".",
+                "",
+            ]
 
     if out is not None and groups:
-        md += ["## Eye-movement MAE during training (in the manner of Figs. 7–9)", "",
-               "Sliding-window MAE (eq. 16): mean over seeds (bold) with ± 1 sd shaded, each lateral position "
-               "as a thin line; the gray dashed line is where the perturbation starts.", ""]
+        md += [
+            "## Eye-movement MAE during training (in the manner of Figs. 7–9)",
+            "",
+            "Sliding-window MAE (eq. 16): mean over seeds (bold) with ± 1 sd shaded, each lateral position "
+            "as a thin line; the gray dashed line is where the perturbation starts.",
+            "",
+        ]
         for g in groups:
             if curves[g.gid] is not None:
                 png = figure_mae_curves(figures, g, curves[g.gid])
@@ -1097,15 +1418,25 @@ def build_report(paths: Sequence[str | Path], out: Path | None = None, name: str
 
     md += ["## Failed or unfinished jobs", ""]
     if failed:
-        md.append(md_table(["directory", "status", "overrides"],
-                           [[_relpath(r.path), r.problem, " ".join(r.overrides) or "—"] for r in failed]))
+        md.append(
+            md_table(
+                ["directory", "status", "overrides"],
+                [[_relpath(r.path), r.problem, " ".join(r.overrides) or "—"] for r in failed],
+            )
+        )
     else:
         md.append("None.")
     md.append("")
-    results["failed"] = [{"dir": _relpath(r.path), "status": r.problem, "overrides": r.overrides} for r in failed]
+    results["failed"] = [
+        {"dir": _relpath(r.path), "status": r.problem, "overrides": r.overrides} for r in failed
+    ]
     if duplicates:
-        md += ["Duplicates left out (same configuration and seed as a run already counted): "
-               + ", ".join(f"`{_relpath(r.path)}`" for r in duplicates) + ".", ""]
+        md += [
+            "Duplicates left out (same configuration and seed as a run already counted): "
+            + ", ".join(f"`{_relpath(r.path)}`" for r in duplicates)
+            + ".",
+            "",
+        ]
         results["duplicates"] = [_relpath(r.path) for r in duplicates]
 
     markdown = "\n".join(md).rstrip() + "\n"
@@ -1119,19 +1450,41 @@ def build_report(paths: Sequence[str | Path], out: Path | None = None, name: str
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="parallax-report", description=__doc__.split("\n\n")[0])
-    parser.add_argument("paths", nargs="+", metavar="RUN_OR_MULTIRUN_DIR",
-                        help="run directories, or folders searched for them (e.g. outputs/multirun/…)")
-    parser.add_argument("--out", default=None,
-                        help="folder for the Markdown, figures and JSON (default: print the Markdown only)")
-    parser.add_argument("--name", default="README.md", help="file name of the Markdown (default README.md); "
-                        "other names prefix the figures and the JSON with their stem")
+    parser.add_argument(
+        "paths",
+        nargs="+",
+        metavar="RUN_OR_MULTIRUN_DIR",
+        help="run directories, or folders searched for them (e.g. outputs/multirun/…)",
+    )
+    parser.add_argument(
+        "--out",
+        default=None,
+        help="folder for the Markdown, figures and JSON (default: print the Markdown only)",
+    )
+    parser.add_argument(
+        "--name",
+        default="README.md",
+        help="file name of the Markdown (default README.md); "
+        "other names prefix the figures and the JSON with their stem",
+    )
     parser.add_argument("--title", default="parallax results", help="first heading of the report")
-    parser.add_argument("--tables", choices=TABLE_CHOICES, default="all",
-                        help="paper: Tables 2–5 and Figs. 10–11; ablation: one table per varying setting; all")
-    parser.add_argument("--notes", default=None, help="a Markdown file put under the title (your reading)")
-    parser.add_argument("--prefer", action="append", default=[], metavar="KEY=VALUE",
-                        help="where several groups fit a cell of the paper's tables, show the one with this "
-                             "setting (repeatable), e.g. --prefer distance.y=0.1")
+    parser.add_argument(
+        "--tables",
+        choices=TABLE_CHOICES,
+        default="all",
+        help="paper: Tables 2–5 and Figs. 10–11; ablation: one table per varying setting; all",
+    )
+    parser.add_argument(
+        "--notes", default=None, help="a Markdown file put under the title (your reading)"
+    )
+    parser.add_argument(
+        "--prefer",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="where several groups fit a cell of the paper's tables, show the one with this "
+        "setting (repeatable), e.g. --prefer distance.y=0.1",
+    )
     args = parser.parse_args(argv)
     try:
         notes = None
@@ -1140,8 +1493,15 @@ def main(argv: list[str] | None = None) -> None:
             if not notes_path.is_file():
                 raise ReportError(f"--notes {args.notes}: no such file")
             notes = notes_path.read_text()
-        markdown, _ = build_report(args.paths, Path(args.out) if args.out else None, name=args.name,
-                                   title=args.title, tables=args.tables, notes=notes, prefer=args.prefer)
+        markdown, _ = build_report(
+            args.paths,
+            Path(args.out) if args.out else None,
+            name=args.name,
+            title=args.title,
+            tables=args.tables,
+            notes=notes,
+            prefer=args.prefer,
+        )
     except ReportError as exc:
         print(f"parallax-report: error: {exc}", file=sys.stderr)
         sys.exit(2)

@@ -59,9 +59,15 @@ def trial_errors(run_dir: str | Path) -> dict:
             steps.append(r["steps"])
     pans_arr = np.asarray(pans, dtype=np.float64).reshape(-1, len(lateral))
     targets_arr = np.asarray(targets, dtype=np.float64).reshape(-1, len(lateral))
-    return {"presentations": presentations, "steps": steps, "lateral_positions": lateral,
-            "labels": [position_label(l) for l in lateral], "pans": pans_arr, "targets": targets_arr,
-            "errors": np.abs(pans_arr - targets_arr)}
+    return {
+        "presentations": presentations,
+        "steps": steps,
+        "lateral_positions": lateral,
+        "labels": [position_label(l) for l in lateral],
+        "pans": pans_arr,
+        "targets": targets_arr,
+        "errors": np.abs(pans_arr - targets_arr),
+    }
 
 
 def recent_mae_per_position(run_dir: str | Path, trials: int = 100) -> list[dict]:
@@ -71,19 +77,32 @@ def recent_mae_per_position(run_dir: str | Path, trials: int = 100) -> list[dict
     records = [r for r in read_metrics(run_dir) if not r.get("perturbed")]
     logged_window = int(load_run_config(run_dir).metrics.summary_trials)
     if trials == logged_window and records and all("mae_recent_per_position" in r for r in records):
-        return [{"presentation": r["presentation"], "steps": r["steps"],
-                 "mae": r["mae_recent_per_position"]} for r in records]
+        return [
+            {
+                "presentation": r["presentation"],
+                "steps": r["steps"],
+                "mae": r["mae_recent_per_position"],
+            }
+            for r in records
+        ]
     table = trial_errors(run_dir)
     tracker = EyeMovementTracker(table["lateral_positions"], window=trials)
     out = []
     for i, (pans, targets) in enumerate(zip(table["pans"], table["targets"])):
         for label, pan, target in zip(table["labels"], pans, targets):
             tracker.record(label, pan, target)
-        last_of_presentation = (i + 1 == len(table["pans"])
-                                or table["presentations"][i + 1] != table["presentations"][i])
+        last_of_presentation = (
+            i + 1 == len(table["pans"])
+            or table["presentations"][i + 1] != table["presentations"][i]
+        )
         if last_of_presentation:
-            out.append({"presentation": table["presentations"][i], "steps": table["steps"][i],
-                        "mae": {k: v["mean"] for k, v in tracker.last_trials(trials).items()}})
+            out.append(
+                {
+                    "presentation": table["presentations"][i],
+                    "steps": table["steps"][i],
+                    "mae": {k: v["mean"] for k, v in tracker.last_trials(trials).items()},
+                }
+            )
     return out
 
 
@@ -100,10 +119,16 @@ def _spread(labels: list[str], tail: np.ndarray, past: np.ndarray, runaway_deg: 
     spread = {}
     for p, k in enumerate(labels):
         runaway = tail[:, p] > runaway_deg
-        spread[k] = {"mean": float(tail[:, p].mean()), "median": float(np.median(tail[:, p])),
-                     "runaway_share": float(runaway.mean()), "trials": int(tail.shape[0]),
-                     "past_share": float((past[runaway, p] > 0).mean()) if runaway.any() else float("nan"),
-                     "runaway_signed_mean": float(past[runaway, p].mean()) if runaway.any() else float("nan")}
+        spread[k] = {
+            "mean": float(tail[:, p].mean()),
+            "median": float(np.median(tail[:, p])),
+            "runaway_share": float(runaway.mean()),
+            "trials": int(tail.shape[0]),
+            "past_share": float((past[runaway, p] > 0).mean()) if runaway.any() else float("nan"),
+            "runaway_signed_mean": float(past[runaway, p].mean())
+            if runaway.any()
+            else float("nan"),
+        }
     return spread
 
 
@@ -124,9 +149,15 @@ def pooled_spread(run_dirs, trials: int = 100, runaway_deg: float = 1.0) -> dict
     labels = parts[0][0]
     for run, (other, _, _) in zip(run_dirs, parts):
         if other != labels:
-            raise ValueError(f"{run} has lateral positions {other}, not {labels}: pool runs of one setting")
-    return _spread(labels, np.concatenate([t for _, t, _ in parts]), np.concatenate([p for _, _, p in parts]),
-                   runaway_deg)
+            raise ValueError(
+                f"{run} has lateral positions {other}, not {labels}: pool runs of one setting"
+            )
+    return _spread(
+        labels,
+        np.concatenate([t for _, t, _ in parts]),
+        np.concatenate([p for _, _, p in parts]),
+        runaway_deg,
+    )
 
 
 def _wall_clock(run_dir: Path) -> dict[int, float]:
@@ -160,9 +191,16 @@ def time_to_learn(run_dir: str | Path, threshold: float = 0.2, trials: int = 100
     run_dir = Path(run_dir)
     rows = recent_mae_per_position(run_dir, trials)
     robots = int(load_run_config(run_dir).env.robots)  # trials per position per presentation
-    result = {"run_dir": str(run_dir), "threshold_deg": threshold, "trials": trials,
-              "presentations_seen": len(rows), "presentation": None, "steps": None,
-              "wall_time_s": None, "worst_position_at_end": None}
+    result = {
+        "run_dir": str(run_dir),
+        "threshold_deg": threshold,
+        "trials": trials,
+        "presentations_seen": len(rows),
+        "presentation": None,
+        "steps": None,
+        "wall_time_s": None,
+        "worst_position_at_end": None,
+    }
     if rows:
         worst = max(rows[-1]["mae"].items(), key=lambda kv: kv[1])
         result["worst_position_at_end"] = {"position": worst[0], "mae_deg": worst[1]}
@@ -183,10 +221,12 @@ def learning_curve(run_dir: str | Path, trials: int = 100) -> dict:
     robots = int(load_run_config(run_dir).env.robots)
     rows = recent_mae_per_position(run_dir, trials)
     clock = _wall_clock(run_dir)
-    return {"robots": robots,
-            "robot_iterations": [r["steps"] * robots for r in rows],
-            "wall_time_s": [clock.get(r["steps"], float("nan")) for r in rows],
-            "worst_mae_deg": [max(r["mae"].values()) for r in rows]}
+    return {
+        "robots": robots,
+        "robot_iterations": [r["steps"] * robots for r in rows],
+        "wall_time_s": [clock.get(r["steps"], float("nan")) for r in rows],
+        "worst_mae_deg": [max(r["mae"].values()) for r in rows],
+    }
 
 
 def plot_learning_curves(run_dirs, path: str | Path, trials: int = 100) -> Path:
@@ -200,22 +240,35 @@ def plot_learning_curves(run_dirs, path: str | Path, trials: int = 100) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m parallax.time_to_learn",
-                                     description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.time_to_learn", description=__doc__.split("\n\n")[0]
+    )
     parser.add_argument("runs", nargs="+", help="run directories (with metrics.jsonl)")
     parser.add_argument("--threshold", type=float, default=0.2, help="MAE target, degrees")
     parser.add_argument("--trials", type=int, default=100, help="recent trials per position")
-    parser.add_argument("--spread", action="store_true",
-                        help="also print the last trials' mean, median and share off by > 1° per position")
-    parser.add_argument("--pooled", action="store_true",
-                        help="also print the spread of all runs' last trials together (the seeds of one setting)")
-    parser.add_argument("--curves", help="also plot the worst position's recent MAE against "
-                        "robot-iterations and wall time into this PNG (B = 1 against B = 16)")
+    parser.add_argument(
+        "--spread",
+        action="store_true",
+        help="also print the last trials' mean, median and share off by > 1° per position",
+    )
+    parser.add_argument(
+        "--pooled",
+        action="store_true",
+        help="also print the spread of all runs' last trials together (the seeds of one setting)",
+    )
+    parser.add_argument(
+        "--curves",
+        help="also plot the worst position's recent MAE against "
+        "robot-iterations and wall time into this PNG (B = 1 against B = 16)",
+    )
     parser.add_argument("--json", help="also write the results here")
     args = parser.parse_args(argv)
     if args.threshold <= 0 or args.trials < 1:
-        print(f"[time_to_learn] --threshold must be > 0 and --trials ≥ 1, got {args.threshold} "
-              f"and {args.trials}", file=sys.stderr)
+        print(
+            f"[time_to_learn] --threshold must be > 0 and --trials ≥ 1, got {args.threshold} "
+            f"and {args.trials}",
+            file=sys.stderr,
+        )
         return 2
     missing = [r for r in args.runs if not (Path(r) / "metrics.jsonl").is_file()]
     if missing:
@@ -224,13 +277,25 @@ def main(argv: list[str] | None = None) -> int:
     results = [time_to_learn(r, args.threshold, args.trials) for r in args.runs]
     for r in results:
         worst = r["worst_position_at_end"]
-        worst_text = f"worst at the end: {worst['position']} cm {worst['mae_deg']:.3f}°" if worst else "no data"
+        worst_text = (
+            f"worst at the end: {worst['position']} cm {worst['mae_deg']:.3f}°"
+            if worst
+            else "no data"
+        )
         if r["presentation"] is None:
-            print(f"{r['run_dir']}: not reached in {r['presentations_seen']} presentations ({worst_text})")
+            print(
+                f"{r['run_dir']}: not reached in {r['presentations_seen']} presentations ({worst_text})"
+            )
         else:
-            wall = f"{r['wall_time_s'] / 60:.1f} min" if r["wall_time_s"] is not None else "wall time unknown"
-            print(f"{r['run_dir']}: ≤ {r['threshold_deg']}° at every position after presentation "
-                  f"{r['presentation']} ({r['steps']} iterations, {wall}; {worst_text})")
+            wall = (
+                f"{r['wall_time_s'] / 60:.1f} min"
+                if r["wall_time_s"] is not None
+                else "wall time unknown"
+            )
+            print(
+                f"{r['run_dir']}: ≤ {r['threshold_deg']}° at every position after presentation "
+                f"{r['presentation']} ({r['steps']} iterations, {wall}; {worst_text})"
+            )
         if args.spread:
             r["spread"] = last_trials_spread(r["run_dir"], args.trials)
             _print_spread(r["spread"])
@@ -246,20 +311,30 @@ def main(argv: list[str] | None = None) -> int:
     if args.curves:
         print(f"curves: {plot_learning_curves(args.runs, args.curves, args.trials)}")
     if args.json:
-        Path(args.json).write_text(json.dumps(results if pooled is None else {"runs": results, "pooled": pooled},
-                                              indent=1))
+        Path(args.json).write_text(
+            json.dumps(results if pooled is None else {"runs": results, "pooled": pooled}, indent=1)
+        )
     return 0
 
 
 def _print_spread(spread: dict) -> None:
-    print("  last trials before the perturbation, per position: "
-          + "  ".join(f"{k} cm {v['mean']:.2f}/{v['median']:.2f}°/{100 * v['runaway_share']:.0f}%"
-                      for k, v in spread.items()) + "   (mean/median/share > 1°)")
+    print(
+        "  last trials before the perturbation, per position: "
+        + "  ".join(
+            f"{k} cm {v['mean']:.2f}/{v['median']:.2f}°/{100 * v['runaway_share']:.0f}%"
+            for k, v in spread.items()
+        )
+        + "   (mean/median/share > 1°)"
+    )
     runaways = {k: v for k, v in spread.items() if v["runaway_share"] > 0}
     if runaways:
-        print("  runaways past the target / their mean signed error (+ past α*, − short or the wrong way): "
-              + "  ".join(f"{k} cm {100 * v['past_share']:.0f}%/{v['runaway_signed_mean']:+.2f}°"
-                          for k, v in runaways.items()))
+        print(
+            "  runaways past the target / their mean signed error (+ past α*, − short or the wrong way): "
+            + "  ".join(
+                f"{k} cm {100 * v['past_share']:.0f}%/{v['runaway_signed_mean']:+.2f}°"
+                for k, v in runaways.items()
+            )
+        )
 
 
 if __name__ == "__main__":

@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import statistics
 import time
-from typing import Callable
+from collections.abc import Callable
 
 
-def interleaved_medians_ms(operations: dict[str, Callable[[], object]], repeats: int,
-                           warmup: int = 3) -> dict[str, float]:
+def interleaved_medians_ms(
+    operations: dict[str, Callable[[], object]], repeats: int, warmup: int = 3
+) -> dict[str, float]:
     """Median milliseconds of each operation over ``repeats`` interleaved rounds."""
     for _ in range(warmup):
         for operation in operations.values():

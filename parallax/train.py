@@ -20,8 +20,17 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
-from parallax.config import (CONFIG_MODULE, CONFIG_NAME, RUN_CONFIG_NAME, ConfigError, changed_settings,
-                             compose, load_run_config, register_resolvers, validate)
+from parallax.config import (
+    CONFIG_MODULE,
+    CONFIG_NAME,
+    RUN_CONFIG_NAME,
+    ConfigError,
+    changed_settings,
+    compose,
+    load_run_config,
+    register_resolvers,
+    validate,
+)
 
 _SWEEP_MARKERS = (",", "range(", "choice(", "glob(", "interval(")
 
@@ -43,8 +52,12 @@ def prevalidate(argv: list[str]) -> None:
     """
     if any(a.startswith("-") for a in argv):
         return
-    if any(marker in a.split("=", 1)[-1] for a in argv for marker in _SWEEP_MARKERS
-           if not a.split("=", 1)[-1].startswith("[")):
+    if any(
+        marker in a.split("=", 1)[-1]
+        for a in argv
+        for marker in _SWEEP_MARKERS
+        if not a.split("=", 1)[-1].startswith("[")
+    ):
         return
     try:
         validate(compose(argv))
@@ -79,17 +92,21 @@ def train(cfg: DictConfig) -> float:
         trainer.exp.close()
         if in_sweep:
             raise ConfigError("resume", f"false but {trainer.checkpoint_path} exists")
-        _fail(f"resume=false but {trainer.checkpoint_path} exists; resume=true continues that run, "
-              "or choose another directory with hydra.run.dir=...")
+        _fail(
+            f"resume=false but {trainer.checkpoint_path} exists; resume=true continues that run, "
+            "or choose another directory with hydra.run.dir=..."
+        )
     if trainer.checkpoint_path.exists() and (trainer.run_dir / RUN_CONFIG_NAME).is_file():
         # Run directories are named by the overrides only, so a default changed in conf/ since
         # the run started would otherwise be resumed into a run trained with the old value.
         changed = changed_settings(load_run_config(trainer.run_dir), cfg)
         if changed:
             trainer.exp.close()
-            reason = (f"{trainer.run_dir} was trained with other settings ({'; '.join(changed[:3])}"
-                      f"{'; …' if len(changed) > 3 else ''}); pass them to continue it, or choose "
-                      "another directory with hydra.run.dir=...")
+            reason = (
+                f"{trainer.run_dir} was trained with other settings ({'; '.join(changed[:3])}"
+                f"{'; …' if len(changed) > 3 else ''}); pass them to continue it, or choose "
+                "another directory with hydra.run.dir=..."
+            )
             if in_sweep:
                 raise ConfigError("resume", reason)
             _fail(f"cannot resume: {reason}")

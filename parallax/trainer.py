@@ -26,7 +26,13 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from parallax import checkpoint
-from parallax.config import READOUT_PANS, RUN_CONFIG_NAME, distance_readout, perturbation_start, start_jitter_on
+from parallax.config import (
+    READOUT_PANS,
+    RUN_CONFIG_NAME,
+    distance_readout,
+    perturbation_start,
+    start_jitter_on,
+)
 from parallax.experiment import Experiment, Presentation
 from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, learn_online, position_label
 
@@ -38,7 +44,9 @@ class Trainer:
         if int(cfg.train.threads) > 0:
             torch.set_num_threads(int(cfg.train.threads))
         self.exp = Experiment(cfg)
-        self.eye = EyeMovementTracker(self.exp.lateral_positions, window=int(cfg.metrics.mae_window))
+        self.eye = EyeMovementTracker(
+            self.exp.lateral_positions, window=int(cfg.metrics.mae_window)
+        )
         self.dist = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
         self.presentation = 0
         self.steps = 0
@@ -59,9 +67,12 @@ class Trainer:
     # --- checkpoints -----------------------------------------------------------------------
     def state_dict(self) -> dict:
         return {
-            "presentation": self.presentation, "steps": self.steps, "wall_time": self.wall_time,
+            "presentation": self.presentation,
+            "steps": self.steps,
+            "wall_time": self.wall_time,
             "experiment": self.exp.state_dict(),
-            "eye": self.eye.state_dict(), "dist": self.dist.state_dict(),
+            "eye": self.eye.state_dict(),
+            "dist": self.dist.state_dict(),
             "before_perturbation": self.before_perturbation,
             "last_distance_stats": self.last_distance_stats,
             "global_rng": checkpoint.global_rng_state(),
@@ -74,7 +85,9 @@ class Trainer:
         """Continue from the run directory's checkpoint, if any; drop log lines written after it."""
         if not self.checkpoint_path.exists():
             return False
-        state = checkpoint.load(self.checkpoint_path, map_location="cpu")  # load_state_dict copies onto the run's device
+        state = checkpoint.load(
+            self.checkpoint_path, map_location="cpu"
+        )  # load_state_dict copies onto the run's device
         self.exp.load_state_dict(state["experiment"])
         self.eye.load_state_dict(state["eye"])
         self.dist.load_state_dict(state["dist"])
@@ -84,8 +97,11 @@ class Trainer:
         self.last_distance_stats = state["last_distance_stats"]
         checkpoint.set_global_rng_state(state["global_rng"])
         if self.metrics_path.exists():
-            kept = [line for line in self.metrics_path.read_text().splitlines()
-                    if _presentation_of(line) <= self.presentation]
+            kept = [
+                line
+                for line in self.metrics_path.read_text().splitlines()
+                if _presentation_of(line) <= self.presentation
+            ]
             self.metrics_path.write_text("".join(line + "\n" for line in kept))
         return True
 
@@ -123,23 +139,31 @@ class Trainer:
         self.steps += pres.steps
         self._maybe_advance_stage()
         record = {
-            "presentation": self.presentation, "steps": self.steps, "stage": self.exp.stage,
-            "perturbed": ran_perturbed, "reward": pres.reward,
+            "presentation": self.presentation,
+            "steps": self.steps,
+            "stage": self.exp.stage,
+            "perturbed": ran_perturbed,
+            "reward": pres.reward,
             **{f"e_{k}": v for k, v in pres.errors.items()},
             **{f"policy_{k}": v for k, v in pres.policy_stats.items()},
-            "mae": self.eye.mae(), "mae_per_position": self.eye.mae_per_position(),
+            "mae": self.eye.mae(),
+            "mae_per_position": self.eye.mae_per_position(),
             "mae_recent": self.eye.recent_mae(int(self.cfg.metrics.summary_trials)),
             # Tables 2–3's window per position, for python -m parallax.time_to_learn
             "mae_recent_per_position": {
-                k: v["mean"] for k, v in self.eye.last_trials(int(self.cfg.metrics.summary_trials)).items()},
+                k: v["mean"]
+                for k, v in self.eye.last_trials(int(self.cfg.metrics.summary_trials)).items()
+            },
             "distance_error": self.dist.by_range(),
             # The eye-movement vectors s and their distances, exactly (JSON floats round-trip), so
             # parallax-replay can re-run the distance learner alone with another y, c or weighting.
-            "pans": pres.pans.tolist(), "distances": pres.distances.tolist(),
+            "pans": pres.pans.tolist(),
+            "distances": pres.distances.tolist(),
             # each trial's pan where the coder's reward peaked (train.distance_readout=best_reward)
             "best_pans": pres.best_pans.tolist(),
             # where each trial started (the paper: 0), and whether it was drawn from the jitter
-            "start_pans": pres.start_pans.tolist(), "start_jitter": jittered,
+            "start_pans": pres.start_pans.tolist(),
+            "start_jitter": jittered,
             "learnt_distance": learnt_distance,
             **{f"lm_{k}": v for k, v in self.last_distance_stats.items()},
         }
@@ -152,8 +176,10 @@ class Trainer:
     # --- summary ---------------------------------------------------------------------------
     def metrics_summary(self) -> dict:
         return {
-            "presentations": self.presentation, "trials": self.eye.trials,
-            "mae": self.eye.mae(), "mae_per_position": self.eye.mae_per_position(),
+            "presentations": self.presentation,
+            "trials": self.eye.trials,
+            "mae": self.eye.mae(),
+            "mae_per_position": self.eye.mae_per_position(),
             "last_trials": self.eye.last_trials(int(self.cfg.metrics.summary_trials)),
             "distance_error": self.dist.by_range(),
         }
@@ -162,11 +188,15 @@ class Trainer:
         return {
             "curriculum": self.cfg.curriculum.name,
             "lateral_positions_cm": [position_label(l) for l in self.exp.lateral_positions],
-            "seed": int(self.cfg.seed), "robots": self.exp.robots, "steps": self.steps,
+            "seed": int(self.cfg.seed),
+            "robots": self.exp.robots,
+            "steps": self.steps,
             **self.metrics_summary(),
             "before_perturbation": self.before_perturbation,
-            "timing": {"wall_time_s": self.wall_time,
-                       "steps_per_second": self.steps * self.exp.robots / max(self.wall_time, 1e-9)},
+            "timing": {
+                "wall_time_s": self.wall_time,
+                "steps_per_second": self.steps * self.exp.robots / max(self.wall_time, 1e-9),
+            },
         }
 
     # --- the run ---------------------------------------------------------------------------
@@ -192,8 +222,12 @@ class Trainer:
     def _log_images(self, writer: SummaryWriter, pres: Presentation) -> None:
         for scale in self.exp.coder.scales:
             grid = np.asarray(self.exp.coder.atom_grid(scale))
-            writer.add_image(f"coder/atoms_{scale}", grid, self.steps,
-                             dataformats="HW" if grid.ndim == 2 else "HWC")
+            writer.add_image(
+                f"coder/atoms_{scale}",
+                grid,
+                self.steps,
+                dataformats="HW" if grid.ndim == 2 else "HWC",
+            )
         if pres.last_view is not None:
             writer.add_image("world/I0_beside_It", pres.last_view, self.steps, dataformats="HWC")
 
@@ -209,16 +243,27 @@ class Trainer:
         if not resumed:
             writer.add_text("config", "```yaml\n" + OmegaConf.to_yaml(cfg) + "\n```", 0)
         interactive = sys.stderr.isatty()
-        bar = tqdm(total=total, initial=self.presentation, desc="presentations", unit="pres",
-                   disable=not interactive, dynamic_ncols=True)
+        bar = tqdm(
+            total=total,
+            initial=self.presentation,
+            desc="presentations",
+            unit="pres",
+            disable=not interactive,
+            dynamic_ncols=True,
+        )
         log_every = max(1, total // 20)
         try:
             with self.metrics_path.open("a") as log:
                 while self.presentation < total:
-                    if self.perturbation_start is not None and self.presentation == self.perturbation_start:
+                    if (
+                        self.perturbation_start is not None
+                        and self.presentation == self.perturbation_start
+                    ):
                         self.before_perturbation = self.metrics_summary()
                         # The learnt state just before §5's perturbation, for parallax-eval --checkpoint.
-                        checkpoint.save_atomic(self.state_dict(), self.run_dir / checkpoint.BEFORE_PERTURBATION_NAME)
+                        checkpoint.save_atomic(
+                            self.state_dict(), self.run_dir / checkpoint.BEFORE_PERTURBATION_NAME
+                        )
                         self.exp.set_perturbation(True)
                     keep_view = (self.presentation + 1) % int(cfg.train.image_every) == 0
                     t0 = time.perf_counter()
@@ -233,16 +278,25 @@ class Trainer:
                         self._log_images(writer, pres)
                     dist_total = record["distance_error"].get("total")
                     if interactive:
-                        bar.set_postfix(steps_s=f"{sps:.0f}", mae=f"{record['mae']:.3f}",
-                                        recent=f"{record['mae_recent']:.3f}",
-                                        dist=f"{dist_total:.2f}%" if dist_total is not None else "-")
+                        bar.set_postfix(
+                            steps_s=f"{sps:.0f}",
+                            mae=f"{record['mae']:.3f}",
+                            recent=f"{record['mae_recent']:.3f}",
+                            dist=f"{dist_total:.2f}%" if dist_total is not None else "-",
+                        )
                         bar.update(1)
                     elif self.presentation % log_every == 0 or self.presentation == total:
-                        print(f"[parallax] presentation {self.presentation}/{total}  "
-                              f"steps/s {sps:.0f}  MAE {record['mae']:.3f}° "
-                              f"(last {int(cfg.metrics.summary_trials)} trials {record['mae_recent']:.3f}°)  distance error "
-                              + (f"{dist_total:.2f}%" if dist_total is not None else "-"), flush=True)
-                    if self.presentation % int(cfg.train.checkpoint_every) == 0 or self.presentation == total:
+                        print(
+                            f"[parallax] presentation {self.presentation}/{total}  "
+                            f"steps/s {sps:.0f}  MAE {record['mae']:.3f}° "
+                            f"(last {int(cfg.metrics.summary_trials)} trials {record['mae_recent']:.3f}°)  distance error "
+                            + (f"{dist_total:.2f}%" if dist_total is not None else "-"),
+                            flush=True,
+                        )
+                    if (
+                        self.presentation % int(cfg.train.checkpoint_every) == 0
+                        or self.presentation == total
+                    ):
                         self.save()
         finally:
             bar.close()
@@ -263,16 +317,23 @@ def _presentation_of(line: str) -> float:
 
 def format_summary(summary: dict) -> str:
     """The final table printed at the end of a run."""
-    lines = [f"parallax — {summary['curriculum']}, seed {summary['seed']}, "
-             f"{summary['presentations']} presentations, {summary['steps']} iterations per robot"]
+    lines = [
+        f"parallax — {summary['curriculum']}, seed {summary['seed']}, "
+        f"{summary['presentations']} presentations, {summary['steps']} iterations per robot"
+    ]
     lines.append(f"{'position (cm)':>14} {'MAE (window)':>13} {'last-trials mean (var)':>24}")
     for label, mae in summary["mae_per_position"].items():
         lt = summary["last_trials"][label]
         lines.append(f"{label:>14} {mae:>13.3f} {lt['mean']:>15.3f} ({lt['var']:.3f})")
     lines.append(f"{'all':>14} {summary['mae']:>13.3f}")
     if summary["distance_error"]:
-        lines.append("distance error (%): " + "  ".join(
-            f"{k}{'' if k == 'total' else ' m'}: {v:.2f}" for k, v in summary["distance_error"].items()))
+        lines.append(
+            "distance error (%): "
+            + "  ".join(
+                f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
+                for k, v in summary["distance_error"].items()
+            )
+        )
     else:
         lines.append("distance error: not yet (the queue of the distance learner is not full)")
     t = summary["timing"]

@@ -18,14 +18,19 @@ def test_coder_work_counts_the_paper_patches():
     assert both["flops"] == coarse["flops"] + fine["flops"]
     N, K, k = 288, 200, 10
     # 529 coarse patches (23×23 after ×8), 289 fine ones (17×17 after ×2)
-    assert coarse["flops"] == 2 * 529 * K * N + 2 * N * N * K + 2 * k * 529 * N + 4 * 529 * k * K + 2 * 529 * k
+    assert (
+        coarse["flops"]
+        == 2 * 529 * K * N + 2 * N * N * K + 2 * k * 529 * N + 4 * 529 * k * K + 2 * 529 * k
+    )
     assert fine["flops"] < coarse["flops"]
     # the Gram matrix is made once per lockstep: 16 robots cost less than 16 single frames
     assert coarse["shared_flops"] == 2 * N * N * K
-    limits = {"matmul_gflops": 100.0, "copy_gbps": 1e6}   # compute-bound
+    limits = {"matmul_gflops": 100.0, "copy_gbps": 1e6}  # compute-bound
     one, sixteen = bench.coder_bound_ms(both, limits, 1), bench.coder_bound_ms(both, limits, 16)
     assert one == pytest.approx(both["flops"] / 1e8)
-    assert sixteen == pytest.approx((16 * (both["flops"] - both["shared_flops"]) + both["shared_flops"]) / 1e8)
+    assert sixteen == pytest.approx(
+        (16 * (both["flops"] - both["shared_flops"]) + both["shared_flops"]) / 1e8
+    )
     assert sixteen < 16 * one
 
 
@@ -35,13 +40,17 @@ def test_ceiling_is_every_core_busy_with_the_coder_at_its_bound():
     # 16 robots share one coder bound for the lockstep; twice the cores, twice the ceiling
     sixteen = bench.ceiling_steps_per_second(1.0, 20.0, robots=16, cores=2)
     assert sixteen == pytest.approx(2 * 16 / 36 * 1e3)
-    assert bench.ceiling_steps_per_second(1.0, 20.0, robots=16, cores=4) == pytest.approx(2 * sixteen)
+    assert bench.ceiling_steps_per_second(1.0, 20.0, robots=16, cores=4) == pytest.approx(
+        2 * sixteen
+    )
     assert bench.usable_cores() >= 1
 
 
 def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
     out = tmp_path / "bench.json"
-    bench.main(["--no-components", "--robots", "1", "2", "1", "--presentations", "1", "--json", str(out)])
+    bench.main(
+        ["--no-components", "--robots", "1", "2", "1", "--presentations", "1", "--json", str(out)]
+    )
     printed = capsys.readouterr().out
     assert "[end to end]" in printed and "[roofline cpu]" in printed
     report = json.loads(out.read_text())
@@ -63,6 +72,9 @@ def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
     assert one["steps_per_second_min"] == one["steps_per_second"] == one["steps_per_second_max"]
     ceiling = report["ceiling"]["cpu"]
     assert ceiling["render_cpu_ms_per_frame"] > 0
-    assert ceiling["B=1"]["steps_per_second"] == pytest.approx(bench.ceiling_steps_per_second(
-        ceiling["render_cpu_ms_per_frame"], cpu["coder_bound_ms_per_frame"], 1, ceiling["cores"]))
+    assert ceiling["B=1"]["steps_per_second"] == pytest.approx(
+        bench.ceiling_steps_per_second(
+            ceiling["render_cpu_ms_per_frame"], cpu["coder_bound_ms_per_frame"], 1, ceiling["cores"]
+        )
+    )
     assert "[ceiling cpu]" in printed and "cores busy" in printed

@@ -14,17 +14,28 @@ from parallax.coding import CoderOutput, MultiScaleCoder, save_png
 from parallax.coding.retina import as_gray_batch
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
-SPECS = {"coarse": {"window": 250, "subsample": 8, "patch": 10, "stride": 1},
-         "fine": {"window": 150, "subsample": 2, "patch": 10, "stride": 4}}
-SMALL_SPECS = {"coarse": {"window": 64, "subsample": 4, "patch": 10, "stride": 2},
-               "fine": {"window": 40, "subsample": 2, "patch": 10, "stride": 5}}
-
-
+SPECS = {
+    "coarse": {"window": 250, "subsample": 8, "patch": 10, "stride": 1},
+    "fine": {"window": 150, "subsample": 2, "patch": 10, "stride": 4},
+}
+SMALL_SPECS = {
+    "coarse": {"window": 64, "subsample": 4, "patch": 10, "stride": 2},
+    "fine": {"window": 40, "subsample": 2, "patch": 10, "stride": 5},
+}
 
 
 def _coder(**overrides) -> MultiScaleCoder:
-    arguments = dict(scales=["coarse", "fine"], scale_specs=SPECS, atoms=288, sparsity=10,
-                     learning_rate=0.2, normalisation="per_half", learn=True, seed=0, image_size=256)
+    arguments = dict(
+        scales=["coarse", "fine"],
+        scale_specs=SPECS,
+        atoms=288,
+        sparsity=10,
+        learning_rate=0.2,
+        normalisation="per_half",
+        learn=True,
+        seed=0,
+        image_size=256,
+    )
     arguments.update(overrides)
     return MultiScaleCoder(**arguments)
 
@@ -34,8 +45,10 @@ def _photo_batch(batch: int, size: int = 256, shift: int = 0) -> np.ndarray:
     import skimage.data
 
     photo = skimage.data.astronaut()
-    crops = [np.roll(photo[40 * index:40 * index + size, 100:100 + size], shift, axis=1)
-             for index in range(batch)]
+    crops = [
+        np.roll(photo[40 * index : 40 * index + size, 100 : 100 + size], shift, axis=1)
+        for index in range(batch)
+    ]
     return np.stack(crops)
 
 
@@ -76,7 +89,9 @@ def test_learning_updates_after_encoding_and_keeps_atoms_unit_norm() -> None:
     before = {name: tensor.clone() for name, tensor in coder.dictionaries.items()}
     learning_output = coder(images)
     frozen_output = frozen(images)
-    torch.testing.assert_close(learning_output.state, frozen_output.state)   # outputs precede the step
+    torch.testing.assert_close(
+        learning_output.state, frozen_output.state
+    )  # outputs precede the step
     for name, dictionary in coder.dictionaries.items():
         assert not torch.equal(dictionary, before[name])
         torch.testing.assert_close(dictionary.norm(dim=1), torch.ones(288))
@@ -95,7 +110,9 @@ def test_a_batch_update_averages_over_all_patches_of_all_images() -> None:
     single(image)
     double(np.concatenate([image, image]))
     for name in ("coarse", "fine"):
-        torch.testing.assert_close(single.dictionaries[name], double.dictionaries[name], atol=1e-6, rtol=0)
+        torch.testing.assert_close(
+            single.dictionaries[name], double.dictionaries[name], atol=1e-6, rtol=0
+        )
 
 
 def test_training_lowers_the_error_on_a_repeated_view() -> None:
@@ -118,10 +135,14 @@ def test_same_seed_same_numbers_and_scales_seeded_independently() -> None:
         outputs.append(coder(_photo_batch(1, shift=1)))
     assert torch.equal(outputs[0].state, outputs[1].state)
     assert torch.equal(outputs[0].reward, outputs[1].reward)
-    assert not torch.equal(_coder(seed=6).dictionaries["coarse"], _coder(seed=5).dictionaries["coarse"])
+    assert not torch.equal(
+        _coder(seed=6).dictionaries["coarse"], _coder(seed=5).dictionaries["coarse"]
+    )
     coarse_only = _coder(seed=5, scales=["coarse"])
     assert torch.equal(coarse_only.dictionaries["coarse"], _coder(seed=5).dictionaries["coarse"])
-    assert not torch.equal(_coder(seed=5).dictionaries["coarse"], _coder(seed=5).dictionaries["fine"])
+    assert not torch.equal(
+        _coder(seed=5).dictionaries["coarse"], _coder(seed=5).dictionaries["fine"]
+    )
 
 
 def test_state_dict_round_trip_carries_dictionaries_but_not_the_reference() -> None:
@@ -135,7 +156,9 @@ def test_state_dict_round_trip_carries_dictionaries_but_not_the_reference() -> N
     restored.set_reference(_photo_batch(1))
     for model in (trained, restored):
         model.learn = False
-    torch.testing.assert_close(restored(_photo_batch(1, shift=4)).state, trained(_photo_batch(1, shift=4)).state)
+    torch.testing.assert_close(
+        restored(_photo_batch(1, shift=4)).state, trained(_photo_batch(1, shift=4)).state
+    )
 
 
 def test_frozen_coder_notices_a_loaded_dictionary() -> None:
@@ -174,7 +197,9 @@ def test_joint_normalisation_runs_and_differs_from_per_half() -> None:
     per_half, joint = _coder(learn=False), _coder(learn=False, normalisation="joint")
     for coder in (per_half, joint):
         coder.set_reference(images)
-    assert not torch.allclose(per_half(_photo_batch(1, shift=5)).state, joint(_photo_batch(1, shift=5)).state)
+    assert not torch.allclose(
+        per_half(_photo_batch(1, shift=5)).state, joint(_photo_batch(1, shift=5)).state
+    )
 
 
 def test_recompute_pursuit_gives_the_same_outputs() -> None:
@@ -182,8 +207,12 @@ def test_recompute_pursuit_gives_the_same_outputs() -> None:
     fast, straightforward = _coder(learn=False), _coder(learn=False, pursuit="recompute")
     for coder in (fast, straightforward):
         coder.set_reference(images)
-    torch.testing.assert_close(fast(_photo_batch(1, shift=2)).reward,
-                               straightforward(_photo_batch(1, shift=2)).reward, atol=1e-4, rtol=0)
+    torch.testing.assert_close(
+        fast(_photo_batch(1, shift=2)).reward,
+        straightforward(_photo_batch(1, shift=2)).reward,
+        atol=1e-4,
+        rtol=0,
+    )
 
 
 def test_compiled_and_torch_pursuit_loops_learn_bit_identical_dictionaries() -> None:
@@ -191,7 +220,9 @@ def test_compiled_and_torch_pursuit_loops_learn_bit_identical_dictionaries() -> 
 
     if native.load_kernels() is None:
         pytest.skip(f"the fused pursuit kernel is unavailable: {native.kernel_failure()}")
-    coders = [_coder(scales=["coarse", "fine"], pursuit=pursuit) for pursuit in ("gram_cpp", "gram_torch")]
+    coders = [
+        _coder(scales=["coarse", "fine"], pursuit=pursuit) for pursuit in ("gram_cpp", "gram_torch")
+    ]
     for coder in coders:
         coder.set_reference(_photo_batch(2))
     for shift in (1, 3, 5):
@@ -201,17 +232,20 @@ def test_compiled_and_torch_pursuit_loops_learn_bit_identical_dictionaries() -> 
         assert torch.equal(coders[0].dictionaries[name], coders[1].dictionaries[name])
 
 
-@pytest.mark.parametrize(("overrides", "message"), [
-    ({"image_size": 200}, r"scale_specs\.coarse\.window=250"),
-    ({"scales": []}, "non-empty"),
-    ({"scales": ["coarse", "coarse"]}, "repeat"),
-    ({"scales": ["middle"]}, "middle"),
-    ({"atoms": 0}, "atoms"),
-    ({"learning_rate": -0.1}, "learning_rate"),
-    ({"normalisation": "global"}, "normalisation"),
-    ({"seed": -1}, "seed"),
-    ({"pursuit": "omp"}, "pursuit"),
-])
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        ({"image_size": 200}, r"scale_specs\.coarse\.window=250"),
+        ({"scales": []}, "non-empty"),
+        ({"scales": ["coarse", "coarse"]}, "repeat"),
+        ({"scales": ["middle"]}, "middle"),
+        ({"atoms": 0}, "atoms"),
+        ({"learning_rate": -0.1}, "learning_rate"),
+        ({"normalisation": "global"}, "normalisation"),
+        ({"seed": -1}, "seed"),
+        ({"pursuit": "omp"}, "pursuit"),
+    ],
+)
 def test_bad_configuration_is_refused_with_the_key_named(overrides: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         _coder(**overrides)
@@ -234,17 +268,21 @@ def test_atom_grid_draws_every_pair(tmp_path: Path) -> None:
     assert grid.dtype == np.uint8 and grid.ndim == 2
     assert grid.shape == (2 * (3 * 11 + 1), 2 * (4 * 22 + 1))
     dictionary = coder.dictionaries["fine"][0].numpy()
-    first_half = grid[2:2 + 20:2, 2:2 + 20:2].astype(float) - 128
+    first_half = grid[2 : 2 + 20 : 2, 2 : 2 + 20 : 2].astype(float) - 128
     peak = np.abs(dictionary).max()
-    np.testing.assert_allclose(first_half, np.rint(127 * dictionary[:100].reshape(10, 10) / peak), atol=1)
+    np.testing.assert_allclose(
+        first_half, np.rint(127 * dictionary[:100].reshape(10, 10) / peak), atol=1
+    )
     path = save_png(grid, tmp_path / "atoms.png")
     assert path.stat().st_size > 0
     with pytest.raises(ValueError, match="unknown scale"):
         coder.atom_grid("coarse")
 
 
-@pytest.mark.parametrize(("name", "scales"), [("two_scale", ["coarse", "fine"]), ("coarse", ["coarse"]),
-                                              ("fine", ["fine"])])
+@pytest.mark.parametrize(
+    ("name", "scales"),
+    [("two_scale", ["coarse", "fine"]), ("coarse", ["coarse"]), ("fine", ["fine"])],
+)
 def test_configs_instantiate(name: str, scales: list[str]) -> None:
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         config = compose(overrides=[f"+coder={name}"])
@@ -255,6 +293,8 @@ def test_configs_instantiate(name: str, scales: list[str]) -> None:
 
 def test_scale_ablation_is_one_override() -> None:
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        config = compose(overrides=["+coder=two_scale", "coder.scales=[coarse]", "coder.learn=false"])
+        config = compose(
+            overrides=["+coder=two_scale", "coder.scales=[coarse]", "coder.learn=false"]
+        )
     coder = instantiate(config.coder, image_size=256, seed=0)
     assert coder.scales == ["coarse"] and coder.learn is False

@@ -6,7 +6,11 @@ import pytest
 import torch
 
 from parallax.coding.dictionary import (
-    codes_times_residuals, gradient_step_, pooled_activity, random_dictionary, reconstruction_error,
+    codes_times_residuals,
+    gradient_step_,
+    pooled_activity,
+    random_dictionary,
+    reconstruction_error,
 )
 from parallax.coding.pursuit import matching_pursuit
 
@@ -66,7 +70,7 @@ def test_cpu_radix_grouping_matches_the_torch_sort_used_elsewhere() -> None:
     from parallax.coding.dictionary import _stable_order
 
     picks = torch.randint(0, 288, (5000,), generator=_generator(5))
-    fast = _stable_order(picks, 288)                 # numpy int16 radix sort on the CPU
-    general = _stable_order(picks, 40_000)           # torch's stable argsort (any device)
+    fast = _stable_order(picks, 288)  # numpy int16 radix sort on the CPU
+    general = _stable_order(picks, 40_000)  # torch's stable argsort (any device)
     assert torch.equal(fast, general)
     assert torch.equal(picks[fast], torch.sort(picks, stable=True).values)

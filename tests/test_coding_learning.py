@@ -23,8 +23,6 @@ HELD_OUT_PHOTOS = ("rocket", "immunohistochemistry")
 PATCH, MARGIN = 10, 12
 
 
-
-
 def _gray(name: str, halvings: int) -> np.ndarray:
     import skimage.data
 
@@ -38,11 +36,15 @@ def _gray(name: str, halvings: int) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def photos() -> dict[str, list[np.ndarray]]:
-    return {"train": [_gray(name, 1) for name in TRAIN_PHOTOS],
-            "held_out": [_gray(name, 1) for name in HELD_OUT_PHOTOS]}
+    return {
+        "train": [_gray(name, 1) for name in TRAIN_PHOTOS],
+        "held_out": [_gray(name, 1) for name in HELD_OUT_PHOTOS],
+    }
 
 
-def _shifted_pairs(images: list[np.ndarray], shifts: np.ndarray, rng: np.random.Generator) -> torch.Tensor:
+def _shifted_pairs(
+    images: list[np.ndarray], shifts: np.ndarray, rng: np.random.Generator
+) -> torch.Tensor:
     """(len(shifts), 200) normalised [I0 patch ; I(t) patch] pairs from random places."""
     count = len(shifts)
     which = rng.integers(len(images), size=count)
@@ -51,16 +53,28 @@ def _shifted_pairs(images: list[np.ndarray], shifts: np.ndarray, rng: np.random.
     for index, image in enumerate(images):
         chosen = np.flatnonzero(which == index)
         height, width = image.shape
-        ys = rng.integers(0, height - PATCH, size=chosen.size)[:, None, None] + offsets[None, :, None]
-        xs = rng.integers(MARGIN, width - PATCH - MARGIN, size=chosen.size)[:, None, None] + offsets[None, None, :]
+        ys = (
+            rng.integers(0, height - PATCH, size=chosen.size)[:, None, None]
+            + offsets[None, :, None]
+        )
+        xs = (
+            rng.integers(MARGIN, width - PATCH - MARGIN, size=chosen.size)[:, None, None]
+            + offsets[None, None, :]
+        )
         pairs[chosen, 0] = image[ys, xs]
         pairs[chosen, 1] = image[ys, xs - shifts[chosen, None, None]]
     halves = zero_mean_unit_norm(torch.from_numpy(pairs.reshape(count, 2, PATCH * PATCH)))
     return halves.reshape(count, 2 * PATCH * PATCH)
 
 
-def _train(images: list[np.ndarray], draw_shifts, updates: int, atoms: int = 64,
-           batch: int = 100, seed: int = 0) -> tuple[torch.Tensor, list[float]]:
+def _train(
+    images: list[np.ndarray],
+    draw_shifts,
+    updates: int,
+    atoms: int = 64,
+    batch: int = 100,
+    seed: int = 0,
+) -> tuple[torch.Tensor, list[float]]:
     rng = np.random.default_rng(seed)
     dictionary = random_dictionary(atoms, 2 * PATCH * PATCH, torch.Generator().manual_seed(seed))
     errors = []
@@ -82,7 +96,7 @@ def _half_correlation(atoms: np.ndarray, shift: int) -> np.ndarray:
         first, second = first[:, :, -shift:], second[:, :, :shift]
     first = first.reshape(len(atoms), -1) - first.reshape(len(atoms), -1).mean(1, keepdims=True)
     second = second.reshape(len(atoms), -1) - second.reshape(len(atoms), -1).mean(1, keepdims=True)
-    return (first * second).sum(1) / np.sqrt((first ** 2).sum(1) * (second ** 2).sum(1) + 1e-12)
+    return (first * second).sum(1) / np.sqrt((first**2).sum(1) * (second**2).sum(1) + 1e-12)
 
 
 def _mean_error(dictionary: torch.Tensor, images: list[np.ndarray], shift: int, seed: int) -> float:
@@ -94,7 +108,9 @@ def _mean_error(dictionary: torch.Tensor, images: list[np.ndarray], shift: int, 
 
 def test_error_falls_and_atoms_learn_the_trained_shift(photos) -> None:
     trained_shift = 2
-    dictionary, errors = _train(photos["train"], lambda rng, n: np.full(n, trained_shift), updates=1200)
+    dictionary, errors = _train(
+        photos["train"], lambda rng, n: np.full(n, trained_shift), updates=1200
+    )
     assert np.mean(errors[-50:]) < 0.5 * np.mean(errors[:50])
 
     atoms = dictionary.numpy().reshape(-1, 2, PATCH, PATCH)
@@ -102,7 +118,11 @@ def test_error_falls_and_atoms_learn_the_trained_shift(photos) -> None:
     elsewhere = [np.median(_half_correlation(atoms, shift)) for shift in (-2, -1, 0, 4)]
     assert at_trained > 0.7, "the I(t) half of an atom should be its I0 half moved by the shift"
     assert at_trained > max(elsewhere) + 0.3
-    initial = random_dictionary(64, 200, torch.Generator().manual_seed(0)).numpy().reshape(-1, 2, PATCH, PATCH)
+    initial = (
+        random_dictionary(64, 200, torch.Generator().manual_seed(0))
+        .numpy()
+        .reshape(-1, 2, PATCH, PATCH)
+    )
     assert abs(np.median(_half_correlation(initial, trained_shift))) < 0.1
 
 
@@ -111,7 +131,9 @@ def test_trained_dictionary_codes_aligned_pairs_best(photos) -> None:
         return np.clip(np.rint(rng.laplace(0.0, 1.0, count)), -4, 4).astype(int)
 
     dictionary, _ = _train(photos["train"], mostly_small, updates=1200, seed=1)
-    errors = {shift: _mean_error(dictionary, photos["held_out"], shift, seed=2) for shift in range(-5, 6)}
+    errors = {
+        shift: _mean_error(dictionary, photos["held_out"], shift, seed=2) for shift in range(-5, 6)
+    }
     assert min(errors, key=errors.get) == 0
     for magnitude in range(1, 5):
         for sign in (-1, 1):
@@ -121,22 +143,29 @@ def test_trained_dictionary_codes_aligned_pairs_best(photos) -> None:
 
 # --- the full two-scale coder on whole frames (slow) ---------------------------------------
 
-SPECS = {"coarse": {"window": 250, "subsample": 8, "patch": 10, "stride": 1},
-         "fine": {"window": 150, "subsample": 2, "patch": 10, "stride": 4}}
+SPECS = {
+    "coarse": {"window": 250, "subsample": 8, "patch": 10, "stride": 1},
+    "fine": {"window": 150, "subsample": 2, "patch": 10, "stride": 4},
+}
 
 
 def _frame_pair(image: np.ndarray, shift: int, rng: np.random.Generator, size: int = 256):
     height, width = image.shape[:2]
     top = int(rng.integers(0, height - size + 1))
     left = int(rng.integers(40, width - size - 40 + 1))
-    return image[None, top:top + size, left:left + size], image[None, top:top + size, left - shift:left - shift + size]
+    return image[None, top : top + size, left : left + size], image[
+        None, top : top + size, left - shift : left - shift + size
+    ]
 
 
 @pytest.mark.slow
 def test_full_coder_learns_and_becomes_shift_sensitive() -> None:
     import skimage.data
 
-    train = [getattr(skimage.data, name)() for name in ("astronaut", "coffee", "chelsea", "brick", "gravel", "camera")]
+    train = [
+        getattr(skimage.data, name)()
+        for name in ("astronaut", "coffee", "chelsea", "brick", "gravel", "camera")
+    ]
     held_out = [skimage.data.rocket(), skimage.data.immunohistochemistry()]
     coder = MultiScaleCoder(["coarse", "fine"], SPECS, seed=0, image_size=256)
     rng = np.random.default_rng(0)
@@ -146,7 +175,7 @@ def test_full_coder_learns_and_becomes_shift_sensitive() -> None:
         reference, current = _frame_pair(train[rng.integers(len(train))], shift, rng)
         coder.set_reference(reference)
         rewards.append(coder(current).reward.item())
-    assert np.mean(rewards[-200:]) > 0.6 * np.mean(rewards[:200])   # rewards are negative
+    assert np.mean(rewards[-200:]) > 0.6 * np.mean(rewards[:200])  # rewards are negative
 
     coder.learn = False
     evaluation = np.random.default_rng(1)
@@ -165,7 +194,7 @@ def test_full_coder_learns_and_becomes_shift_sensitive() -> None:
     assert all(errors[a] < errors[b] for a, b in zip(shifts, shifts[1:])), errors
 
     # The atoms that code aligned views are binocular: their two halves are nearly the same.
-    coarse_activity = aligned_activity[:coder.atoms].numpy()
+    coarse_activity = aligned_activity[: coder.atoms].numpy()
     most_used = np.argsort(-coarse_activity)[:50]
     atoms = coder.dictionaries["coarse"].numpy().reshape(-1, 2, PATCH, PATCH)
     assert np.median(_half_correlation(atoms[most_used], 0)) > 0.6

@@ -8,12 +8,15 @@ import torch
 from sklearn.linear_model import orthogonal_mp
 
 from parallax.coding.dictionary import random_dictionary
-from parallax.coding.pursuit import dense_codes, gram_matrix, matching_pursuit, matching_pursuit_recompute
+from parallax.coding.pursuit import (
+    dense_codes,
+    gram_matrix,
+    matching_pursuit,
+    matching_pursuit_recompute,
+)
 from parallax.coding.retina import stack_pair
 
 K, N, SPARSITY = 200, 288, 10
-
-
 
 
 def _unit_rows(rows: int, dim: int, seed: int, dtype: torch.dtype = torch.float64) -> torch.Tensor:
@@ -36,10 +39,14 @@ def _per_patch_reference(patch: np.ndarray, dictionary: np.ndarray, sparsity: in
 def test_batched_pursuit_equals_the_per_patch_loop_on_random_dictionaries() -> None:
     dictionary = _unit_rows(N, K, seed=0)
     patches = _unit_rows(60, K, seed=1) * 1.4
-    for code in (matching_pursuit(patches, dictionary, SPARSITY),
-                 matching_pursuit_recompute(patches, dictionary, SPARSITY)):
+    for code in (
+        matching_pursuit(patches, dictionary, SPARSITY),
+        matching_pursuit_recompute(patches, dictionary, SPARSITY),
+    ):
         for row in range(patches.shape[0]):
-            codes, residual = _per_patch_reference(patches[row].numpy(), dictionary.numpy(), SPARSITY)
+            codes, residual = _per_patch_reference(
+                patches[row].numpy(), dictionary.numpy(), SPARSITY
+            )
             np.testing.assert_allclose(code.codes[row].numpy(), codes, atol=1e-5)
             np.testing.assert_allclose(code.residuals[row].numpy(), residual, atol=1e-5)
 
@@ -50,8 +57,10 @@ def test_float32_gram_form_agrees_with_recomputed_correlations() -> None:
     gram_form = matching_pursuit(patches, dictionary, SPARSITY)
     recomputed = matching_pursuit_recompute(patches, dictionary, SPARSITY)
     same_picks = (gram_form.atom_indices == recomputed.atom_indices).all(dim=1)
-    assert same_picks.float().mean() > 0.97   # float32 near-ties may flip a rare late pick
-    torch.testing.assert_close(gram_form.codes[same_picks], recomputed.codes[same_picks], atol=1e-5, rtol=0)
+    assert same_picks.float().mean() > 0.97  # float32 near-ties may flip a rare late pick
+    torch.testing.assert_close(
+        gram_form.codes[same_picks], recomputed.codes[same_picks], atol=1e-5, rtol=0
+    )
 
 
 def test_residual_norm_never_increases() -> None:
@@ -68,7 +77,7 @@ def test_residual_norm_never_increases() -> None:
 
 
 def test_atoms_may_be_picked_again_and_their_coefficients_accumulate() -> None:
-    dictionary = _unit_rows(20, 8, seed=6, dtype=torch.float64)   # overcomplete in 8-D
+    dictionary = _unit_rows(20, 8, seed=6, dtype=torch.float64)  # overcomplete in 8-D
     patches = _unit_rows(200, 8, seed=7, dtype=torch.float64)
     code = matching_pursuit(patches, dictionary, sparsity=12)
     repeated = [row for row in range(200) if code.atom_indices[row].unique().numel() < 12]
@@ -83,7 +92,7 @@ def test_atoms_may_be_picked_again_and_their_coefficients_accumulate() -> None:
 def test_orthonormal_dictionary_recovers_sparse_codes_exactly_like_omp() -> None:
     rng = np.random.default_rng(8)
     basis, _ = np.linalg.qr(rng.standard_normal((K, K)))
-    dictionary = torch.from_numpy(basis.T.copy())              # rows orthonormal
+    dictionary = torch.from_numpy(basis.T.copy())  # rows orthonormal
     true_codes = np.zeros((40, K))
     for row in range(40):
         support = rng.choice(K, size=SPARSITY, replace=False)
@@ -96,7 +105,9 @@ def test_orthonormal_dictionary_recovers_sparse_codes_exactly_like_omp() -> None
     np.testing.assert_allclose(code.codes.numpy(), omp, atol=1e-10)
 
 
-def test_orthonormal_dictionary_keeps_the_k_largest_coefficients_of_a_dense_signal_like_omp() -> None:
+def test_orthonormal_dictionary_keeps_the_k_largest_coefficients_of_a_dense_signal_like_omp() -> (
+    None
+):
     rng = np.random.default_rng(9)
     basis, _ = np.linalg.qr(rng.standard_normal((K, K)))
     patches = torch.from_numpy(rng.standard_normal((30, K)))
@@ -136,6 +147,7 @@ def test_cpu_and_device_agnostic_steps_agree() -> None:
 
 # --- the compiled kernel (pursuit_kernel.cpp) against the numpy/torch loop -----------------------
 
+
 def _compiler_missing() -> str | None:
     """Why the kernel cannot be built here at all (no C++ compiler or no ninja), else None."""
     import shutil
@@ -158,7 +170,9 @@ def compiled():
     if missing:
         pytest.skip(f"the compiled pursuit kernels cannot be built: {missing}")
     module = native.load_kernels()
-    assert module is not None, f"the kernels failed to build or disagreed: {native.kernel_failure()}"
+    assert module is not None, (
+        f"the kernels failed to build or disagreed: {native.kernel_failure()}"
+    )
     return module
 
 
@@ -180,18 +194,26 @@ def _realistic_patches(dtype: torch.dtype) -> torch.Tensor:
     photo = skimage.data.astronaut()
     reference = as_gray_batch(photo[None, 100:356, 100:356])
     current = as_gray_batch(photo[None, 100:356, 96:352])
-    pairs = stack_pair(prepare_reference(scale_patches(reference, spec), "per_half"),
-                       scale_patches(current, spec), "per_half")
+    pairs = stack_pair(
+        prepare_reference(scale_patches(reference, spec), "per_half"),
+        scale_patches(current, spec),
+        "per_half",
+    )
     return pairs.reshape(-1, spec.dim).to(dtype)
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-@pytest.mark.parametrize("atoms", [N, 75, 37, 5])   # whole vector lanes, long and short tails, only a tail
-def test_fused_kernel_is_bit_identical_to_the_torch_loop_on_random_data(compiled, dtype, atoms) -> None:
+@pytest.mark.parametrize(
+    "atoms", [N, 75, 37, 5]
+)  # whole vector lanes, long and short tails, only a tail
+def test_fused_kernel_is_bit_identical_to_the_torch_loop_on_random_data(
+    compiled, dtype, atoms
+) -> None:
     dictionary = _unit_rows(atoms, K, seed=20, dtype=dtype)
     correlations = _unit_rows(200, K, seed=21, dtype=dtype) @ dictionary.T
     (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(
-        compiled, correlations, gram_matrix(dictionary), SPARSITY)
+        compiled, correlations, gram_matrix(dictionary), SPARSITY
+    )
     assert fused_picks.dtype == torch.int64 and fused_coefficients.dtype == dtype
     assert torch.equal(fused_picks, picks)
     assert torch.equal(fused_coefficients, coefficients)
@@ -209,8 +231,12 @@ def test_fused_kernel_is_bit_identical_on_normalised_photo_patches(compiled, dty
     recomputed = matching_pursuit_recompute(patches, dictionary, SPARSITY)
     same_picks = (code_fused.atom_indices == recomputed.atom_indices).all(dim=1)
     assert same_picks.float().mean() > (0.97 if dtype == torch.float32 else 0.999)
-    torch.testing.assert_close(code_fused.coefficients[same_picks], recomputed.coefficients[same_picks],
-                               rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(
+        code_fused.coefficients[same_picks],
+        recomputed.coefficients[same_picks],
+        rtol=1e-5,
+        atol=1e-6,
+    )
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
@@ -221,7 +247,8 @@ def test_fused_kernel_breaks_ties_like_numpy_argmax(compiled, dtype) -> None:
     dictionary = atoms.repeat_interleave(2, dim=0)
     correlations = _unit_rows(100, K, seed=24, dtype=dtype) @ dictionary.T
     (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(
-        compiled, correlations, gram_matrix(dictionary), SPARSITY)
+        compiled, correlations, gram_matrix(dictionary), SPARSITY
+    )
     assert torch.equal(fused_picks, picks) and torch.equal(fused_coefficients, coefficients)
     assert (picks[:, 0] % 2 == 0).all()
     # ±equal magnitudes, zero rows, a NaN and an infinity: numpy's argmax of |c| decides.
@@ -230,12 +257,18 @@ def test_fused_kernel_breaks_ties_like_numpy_argmax(compiled, dtype) -> None:
     special[1] = 0
     special[2, 100] = float("nan")
     special[3, 7] = float("-inf")
-    special[4, N - 1] = 0.75          # the maximum in the tail after the last whole lane
+    special[4, N - 1] = 0.75  # the maximum in the tail after the last whole lane
     gram = torch.eye(N, dtype=dtype)
-    (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(compiled, special, gram, 3)
+    (picks, coefficients), (fused_picks, fused_coefficients) = _both_steps(
+        compiled, special, gram, 3
+    )
     assert torch.equal(fused_picks, picks)
     torch.testing.assert_close(fused_coefficients, coefficients, equal_nan=True, rtol=0, atol=0)
-    assert fused_picks[1].tolist() == [0, 0, 0] and fused_picks[2, 0] == 100 and fused_picks[4, 0] == N - 1
+    assert (
+        fused_picks[1].tolist() == [0, 0, 0]
+        and fused_picks[2, 0] == 100
+        and fused_picks[4, 0] == N - 1
+    )
 
 
 def test_fused_kernels_refuse_bad_arguments(compiled) -> None:
@@ -261,11 +294,15 @@ def test_fused_kernels_give_the_torch_codes_residuals_and_gradient_bit_for_bit(c
     for dtype in (torch.float32, torch.float64):
         dictionary = random_dictionary(N, K, torch.Generator().manual_seed(28), dtype=dtype)
         patches = torch.cat([_realistic_patches(dtype), torch.zeros(3, K, dtype=dtype)])
-        codes = {kernel: matching_pursuit(patches, dictionary, SPARSITY, kernel=kernel)
-                 for kernel in ("torch", "cpp")}
+        codes = {
+            kernel: matching_pursuit(patches, dictionary, SPARSITY, kernel=kernel)
+            for kernel in ("torch", "cpp")
+        }
         for field in ("atom_indices", "coefficients", "codes", "residuals"):
             assert torch.equal(getattr(codes["cpp"], field), getattr(codes["torch"], field)), field
-        products = [codes_times_residuals(codes["torch"], N, kernel=kernel) for kernel in ("torch", "cpp")]
+        products = [
+            codes_times_residuals(codes["torch"], N, kernel=kernel) for kernel in ("torch", "cpp")
+        ]
         assert torch.equal(products[0], products[1])
         stepped = []
         for kernel in ("torch", "cpp"):
@@ -282,13 +319,21 @@ def test_the_gradient_of_chunks_of_patches_is_that_of_all_of_them_bit_for_bit(co
 
     dictionary = random_dictionary(N, K, torch.Generator().manual_seed(31))
     patches = _realistic_patches(torch.float32)
-    chunks = [matching_pursuit(part, dictionary, SPARSITY) for part in (patches[:200], patches[200:201],
-                                                                     patches[201:])]
-    whole = SparseCode(*(torch.cat([getattr(chunk, field) for chunk in chunks])
-                         for field in ("atom_indices", "coefficients", "codes", "residuals")))
+    chunks = [
+        matching_pursuit(part, dictionary, SPARSITY)
+        for part in (patches[:200], patches[200:201], patches[201:])
+    ]
+    whole = SparseCode(
+        *(
+            torch.cat([getattr(chunk, field) for chunk in chunks])
+            for field in ("atom_indices", "coefficients", "codes", "residuals")
+        )
+    )
     for kernel in ("torch", "cpp"):
-        assert torch.equal(codes_times_residuals(chunks, N, kernel=kernel),
-                           codes_times_residuals(whole, N, kernel=kernel)), kernel
+        assert torch.equal(
+            codes_times_residuals(chunks, N, kernel=kernel),
+            codes_times_residuals(whole, N, kernel=kernel),
+        ), kernel
         stepped_whole, stepped_chunks = dictionary.clone(), dictionary.clone()
         gradient_step_(stepped_whole, whole, 0.2, kernel=kernel)
         gradient_step_(stepped_chunks, chunks, 0.2, kernel=kernel)
@@ -296,15 +341,23 @@ def test_the_gradient_of_chunks_of_patches_is_that_of_all_of_them_bit_for_bit(co
 
 
 def test_theta_from_the_picks_is_torchs_theta_bit_for_bit_where_the_coder_uses_it(compiled) -> None:
-    from parallax.coding.dictionary import exact_pooled_activity_kernel, pooled_activity, pooled_activity_of
+    from parallax.coding.dictionary import (
+        exact_pooled_activity_kernel,
+        pooled_activity,
+        pooled_activity_of,
+    )
 
     patches = _realistic_patches(torch.float32)
     dictionary = random_dictionary(N, K, torch.Generator().manual_seed(32))
-    assert exact_pooled_activity_kernel(patches.shape[0], N, SPARSITY, torch.float32)   # the paper's coarse scale
+    assert exact_pooled_activity_kernel(
+        patches.shape[0], N, SPARSITY, torch.float32
+    )  # the paper's coarse scale
     sparse = matching_pursuit(patches, dictionary, SPARSITY, dense_codes=False)
     dense = matching_pursuit(patches, dictionary, SPARSITY)
     assert sparse.codes is None and torch.equal(sparse.residuals, dense.residuals)
-    assert torch.equal(pooled_activity_of(sparse, 1, N), pooled_activity(dense.codes.reshape(1, -1, N)))
+    assert torch.equal(
+        pooled_activity_of(sparse, 1, N), pooled_activity(dense.codes.reshape(1, -1, N))
+    )
 
 
 def test_half_precision_takes_the_torch_code_even_when_the_kernels_are_asked_for(compiled) -> None:
@@ -312,7 +365,9 @@ def test_half_precision_takes_the_torch_code_even_when_the_kernels_are_asked_for
 
     dictionary = random_dictionary(30, 20, torch.Generator().manual_seed(29), dtype=torch.float16)
     patches = torch.randn(7, 20, generator=torch.Generator().manual_seed(30)).half()
-    asked, plain = (matching_pursuit(patches, dictionary, 4, kernel=kernel) for kernel in ("cpp", "torch"))
+    asked, plain = (
+        matching_pursuit(patches, dictionary, 4, kernel=kernel) for kernel in ("cpp", "torch")
+    )
     assert torch.equal(asked.codes, plain.codes) and torch.equal(asked.residuals, plain.residuals)
     gradient_step_(dictionary, asked, 0.1, kernel="cpp")
     assert dictionary.dtype == torch.float16 and torch.isfinite(dictionary).all()
@@ -327,8 +382,12 @@ def test_the_kernel_choice_follows_the_argument_and_the_environment(monkeypatch)
     with pytest.raises(ValueError, match="PARALLAX_PURSUIT_KERNEL"):
         matching_pursuit(torch.zeros(2, K), random_dictionary(N, K, torch.Generator()), SPARSITY)
     with pytest.raises(ValueError, match="kernel"):
-        matching_pursuit(torch.zeros(2, K), random_dictionary(N, K, torch.Generator()), SPARSITY,
-                         kernel="fortran")
+        matching_pursuit(
+            torch.zeros(2, K),
+            random_dictionary(N, K, torch.Generator()),
+            SPARSITY,
+            kernel="fortran",
+        )
 
 
 def test_without_the_kernels_the_coder_falls_back_with_one_warning(monkeypatch, caplog) -> None:

@@ -8,8 +8,17 @@ import pytest
 import torch
 
 from parallax.coding.retina import (
-    ScaleSpec, as_gray_batch, centre_window, extract_patches, prepare_reference, pyramid_down,
-    pyramid_down_torch, rgb_to_gray_torch, scale_patches, stack_pair, zero_mean_unit_norm,
+    ScaleSpec,
+    as_gray_batch,
+    centre_window,
+    extract_patches,
+    prepare_reference,
+    pyramid_down,
+    pyramid_down_torch,
+    rgb_to_gray_torch,
+    scale_patches,
+    stack_pair,
+    zero_mean_unit_norm,
 )
 
 COARSE = ScaleSpec(window=250, subsample=8, patch=10, stride=1)
@@ -61,10 +70,14 @@ def test_opencv_without_worker_threads_gives_the_same_patches() -> None:
     try:
         cv2.setNumThreads(max(2, previous))
         threaded = [scale_patches(as_gray_batch(rgb), spec) for spec in (COARSE, FINE)]
-        blurred_threaded = cv2.GaussianBlur(rgb[0], (0, 0), sigmaX=2.0, borderType=cv2.BORDER_REFLECT_101)
+        blurred_threaded = cv2.GaussianBlur(
+            rgb[0], (0, 0), sigmaX=2.0, borderType=cv2.BORDER_REFLECT_101
+        )
         cv2.setNumThreads(0)
         alone = [scale_patches(as_gray_batch(rgb), spec) for spec in (COARSE, FINE)]
-        blurred_alone = cv2.GaussianBlur(rgb[0], (0, 0), sigmaX=2.0, borderType=cv2.BORDER_REFLECT_101)
+        blurred_alone = cv2.GaussianBlur(
+            rgb[0], (0, 0), sigmaX=2.0, borderType=cv2.BORDER_REFLECT_101
+        )
     finally:
         cv2.setNumThreads(previous)
     for a, b in zip(threaded, alone):
@@ -74,17 +87,25 @@ def test_opencv_without_worker_threads_gives_the_same_patches() -> None:
 
 def test_grayscale_matches_opencv_and_accepts_every_input_form() -> None:
     rgb = _random_images(2, size=40)
-    expected = np.stack([cv2.cvtColor(image.astype(np.float32), cv2.COLOR_RGB2GRAY) for image in rgb])
+    expected = np.stack(
+        [cv2.cvtColor(image.astype(np.float32), cv2.COLOR_RGB2GRAY) for image in rgb]
+    )
     np.testing.assert_allclose(as_gray_batch(rgb).numpy() * 255, expected, atol=1e-3)
-    np.testing.assert_allclose(as_gray_batch(torch.from_numpy(rgb)).numpy() * 255, expected, atol=1e-3)
-    np.testing.assert_allclose(rgb_to_gray_torch(torch.from_numpy(rgb)).numpy(), expected, atol=1e-3)
+    np.testing.assert_allclose(
+        as_gray_batch(torch.from_numpy(rgb)).numpy() * 255, expected, atol=1e-3
+    )
+    np.testing.assert_allclose(
+        rgb_to_gray_torch(torch.from_numpy(rgb)).numpy(), expected, atol=1e-3
+    )
     gray_float = expected / 255
     np.testing.assert_allclose(as_gray_batch(gray_float).numpy(), gray_float, atol=1e-6)
-    flipped = rgb[:, ::-1]                       # a non-contiguous numpy view
+    flipped = rgb[:, ::-1]  # a non-contiguous numpy view
     np.testing.assert_allclose(as_gray_batch(flipped).numpy() * 255, expected[:, ::-1], atol=1e-3)
 
 
-@pytest.mark.parametrize("bad", [np.zeros((2, 8, 8, 4)), np.zeros((8, 8)), np.zeros((1, 2, 8, 8, 3))])
+@pytest.mark.parametrize(
+    "bad", [np.zeros((2, 8, 8, 4)), np.zeros((8, 8)), np.zeros((1, 2, 8, 8, 3))]
+)
 def test_bad_image_shapes_are_refused(bad: np.ndarray) -> None:
     with pytest.raises(ValueError, match="shape"):
         as_gray_batch(bad)
@@ -102,7 +123,7 @@ def test_patches_are_row_major_windows_at_the_stride() -> None:
     image = torch.arange(20 * 20, dtype=torch.float32).reshape(1, 20, 20)
     patches = extract_patches(image, patch=10, stride=4)
     per_side = (20 - 10) // 4 + 1
-    assert patches.shape == (1, per_side ** 2, 100)
+    assert patches.shape == (1, per_side**2, 100)
     second_row_first_column = patches[0, per_side]
     assert torch.equal(second_row_first_column, image[0, 4:14, 0:10].reshape(-1))
 
@@ -124,7 +145,7 @@ def test_joint_normalisation_normalises_the_whole_pair_and_keeps_contrast_ratio(
     rng = np.random.default_rng(5)
     reference_raw = torch.from_numpy(rng.random((1, 4, 100)).astype(np.float32))
     patch_mean = reference_raw.mean(-1, keepdim=True)
-    current_raw = patch_mean + 0.25 * (reference_raw - patch_mean)   # a quarter of the contrast
+    current_raw = patch_mean + 0.25 * (reference_raw - patch_mean)  # a quarter of the contrast
     pairs = stack_pair(prepare_reference(reference_raw, "joint"), current_raw, "joint")
     torch.testing.assert_close(pairs.mean(-1), torch.zeros(1, 4), atol=1e-6, rtol=0)
     torch.testing.assert_close(pairs.norm(dim=-1), torch.ones(1, 4), atol=1e-5, rtol=0)

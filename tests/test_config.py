@@ -27,32 +27,43 @@ def test_every_curriculum_composes(name):
     validate(compose([f"curriculum={name}"]))
 
 
-@pytest.mark.parametrize("override,key", [
-    ("curriculum.lateral_positions=[]", "curriculum.lateral_positions"),
-    ("curriculum.lateral_positions=[0.1,0.05]", "curriculum.lateral_positions"),
-    ("distance.queue_size=0", "distance.queue_size"),
-    ("coder.scales=[medium]", "coder.scales"),
-    ("coder.scale_specs.coarse.window=300", "coder.scale_specs.coarse.window"),
-    ("device=tpu", "device"),
-    ("train.start_jitter_presentations=-1", "train.start_jitter_presentations"),
-    ("train.start_jitter_presentations=0.5", "train.start_jitter_presentations"),
-    ("train.distance_readout=peak", "train.distance_readout"),
-])
+@pytest.mark.parametrize(
+    "override,key",
+    [
+        ("curriculum.lateral_positions=[]", "curriculum.lateral_positions"),
+        ("curriculum.lateral_positions=[0.1,0.05]", "curriculum.lateral_positions"),
+        ("distance.queue_size=0", "distance.queue_size"),
+        ("coder.scales=[medium]", "coder.scales"),
+        ("coder.scale_specs.coarse.window=300", "coder.scale_specs.coarse.window"),
+        ("device=tpu", "device"),
+        ("train.start_jitter_presentations=-1", "train.start_jitter_presentations"),
+        ("train.start_jitter_presentations=0.5", "train.start_jitter_presentations"),
+        ("train.distance_readout=peak", "train.distance_readout"),
+    ],
+)
 def test_validate_names_the_key(override, key):
     with pytest.raises(ConfigError) as info:
         validate(compose([override]))
     assert info.value.key == key
 
 
-@pytest.mark.parametrize("override,needle", [
-    ("curriculum.lateral_positions=[]", "curriculum.lateral_positions"),
-    ("coder.scales=[medium]", "coder.scales"),
-    ("no_such_key=1", "no_such_key"),
-])
+@pytest.mark.parametrize(
+    "override,needle",
+    [
+        ("curriculum.lateral_positions=[]", "curriculum.lateral_positions"),
+        ("coder.scales=[medium]", "coder.scales"),
+        ("no_such_key=1", "no_such_key"),
+    ],
+)
 def test_cli_bad_config_fails_before_writing(tmp_path, override, needle):
     run_dir = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "parallax.train", override, f"hydra.run.dir={run_dir}"],
-                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "parallax.train", override, f"hydra.run.dir={run_dir}"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=120,
+    )
     assert proc.returncode != 0
     lines = [line for line in proc.stderr.splitlines() if line.strip()]
     assert len(lines) == 1, proc.stderr
@@ -91,17 +102,23 @@ def test_a_run_saved_before_a_setting_existed_has_that_settings_old_value():
     del saved.policy["reward_change_gain"]
     del saved.train["start_jitter_presentations"]
     del saved.train["distance_readout"]
-    assert set(SETTINGS_ADDED_LATER) == {"distance.lm.weight_decay", "distance.outlier_mads",
-                                         "env.initial_pan_jitter_deg_per_m",
-                                         "policy.eye_position_reference_m", "policy.reward_change_gain",
-                                         "train.start_jitter_presentations", "train.distance_readout"}
+    assert set(SETTINGS_ADDED_LATER) == {
+        "distance.lm.weight_decay",
+        "distance.outlier_mads",
+        "env.initial_pan_jitter_deg_per_m",
+        "policy.eye_position_reference_m",
+        "policy.reward_change_gain",
+        "train.start_jitter_presentations",
+        "train.distance_readout",
+    }
     # the reward-change feature came with a default of its own: a run saved before it had none,
     # so resuming it under the new default is a change of setting, not a silent switch
     assert changed_settings(saved, current) == ["policy.reward_change_gain: 0.0 → 10.0"]
     current = compose(["policy.reward_change_gain=0"])
     assert changed_settings(saved, current) == []
-    assert changed_settings(saved, compose(["distance.lm.weight_decay=0.01", "policy.reward_change_gain=0"])) == [
-        "distance.lm.weight_decay: 0.0 → 0.01"]
+    assert changed_settings(
+        saved, compose(["distance.lm.weight_decay=0.01", "policy.reward_change_gain=0"])
+    ) == ["distance.lm.weight_decay: 0.0 → 0.01"]
 
 
 def test_a_run_is_lengthened_only_where_its_perturbation_stays():
@@ -109,14 +126,33 @@ def test_a_run_is_lengthened_only_where_its_perturbation_stays():
 
     from parallax.config import changed_settings, perturbation_start
 
-    saved = compose(["perturbation=rotate_blur", "train.presentations=200", "perturbation.start_fraction=0.6667"])
+    saved = compose(
+        [
+            "perturbation=rotate_blur",
+            "train.presentations=200",
+            "perturbation.start_fraction=0.6667",
+        ]
+    )
     assert perturbation_start(saved) == 133
     # more presentations with the start moved back to presentation 133: a longer continuation
-    longer = compose(["perturbation=rotate_blur", "train.presentations=400", "perturbation.start_fraction=0.3325"])
+    longer = compose(
+        [
+            "perturbation=rotate_blur",
+            "train.presentations=400",
+            "perturbation.start_fraction=0.3325",
+        ]
+    )
     assert changed_settings(saved, longer) == []
     # more presentations alone would switch the perturbation on at 267, after the run had it on
-    moved = compose(["perturbation=rotate_blur", "train.presentations=400", "perturbation.start_fraction=0.6667"])
+    moved = compose(
+        [
+            "perturbation=rotate_blur",
+            "train.presentations=400",
+            "perturbation.start_fraction=0.6667",
+        ]
+    )
     assert changed_settings(saved, moved) == [
-        "the perturbation's start presentation (perturbation.start_fraction × train.presentations): 133 → 267"]
+        "the perturbation's start presentation (perturbation.start_fraction × train.presentations): 133 → 267"
+    ]
     unperturbed = OmegaConf.merge(saved, {"perturbation": {"start_fraction": None}})
     assert any("start presentation" in change for change in changed_settings(saved, unperturbed))

@@ -26,13 +26,15 @@ def test_runaways_are_found_and_ordinary_vectors_kept():
     pans, distances, runaway = runaway_stream(100, 0.15, seed=0)
     mask = consistent_mask(torch.as_tensor(pans), torch.as_tensor(distances), mads=3.0).numpy()
     assert runaway.sum() >= 8
-    assert not mask[runaway].any()              # every runaway left out
-    assert mask[~runaway].mean() > 0.9          # few ordinary vectors lost
+    assert not mask[runaway].any()  # every runaway left out
+    assert mask[~runaway].mean() > 0.9  # few ordinary vectors lost
 
 
 def test_small_or_uniform_queues_are_used_whole():
     pans, distances, _ = runaway_stream(9, 0.5, seed=1)
-    assert consistent_mask(torch.as_tensor(pans), torch.as_tensor(distances), 3.0, neighbours=8).all()
+    assert consistent_mask(
+        torch.as_tensor(pans), torch.as_tensor(distances), 3.0, neighbours=8
+    ).all()
     same = torch.ones(30, 4)
     assert consistent_mask(same, torch.linspace(3, 10, 30), 3.0).all()
 
@@ -46,8 +48,14 @@ def test_a_vector_is_not_its_own_neighbour():
 
 def test_the_learner_fits_without_the_runaways_in_its_queue():
     pans, distances, runaway = runaway_stream(140, 0.15, seed=2)
-    learner = DistanceLearner(PAPER_LATERAL_POSITIONS_M, queue_size=100, hidden=30, initial_epochs=60,
-                              seed=0, outlier_mads=3.0)
+    learner = DistanceLearner(
+        PAPER_LATERAL_POSITIONS_M,
+        queue_size=100,
+        hidden=30,
+        initial_epochs=60,
+        seed=0,
+        outlier_mads=3.0,
+    )
     stats = [learner.observe(s, d) for s, d in zip(pans, distances)]
     queued_runaways = int(runaway[-100:].sum())
     assert queued_runaways >= 8
@@ -55,15 +63,20 @@ def test_the_learner_fits_without_the_runaways_in_its_queue():
     # the fit ignored them: the network's error on the runaways is far above its error elsewhere
     errors = np.abs(learner.predict(pans[-100:]) - distances[-100:])
     assert np.median(errors[runaway[-100:]]) > 3 * np.median(errors[~runaway[-100:]])
-    paper = DistanceLearner(PAPER_LATERAL_POSITIONS_M, queue_size=100, hidden=30, initial_epochs=60, seed=0)
+    paper = DistanceLearner(
+        PAPER_LATERAL_POSITIONS_M, queue_size=100, hidden=30, initial_epochs=60, seed=0
+    )
     assert [paper.observe(s, d) for s, d in zip(pans, distances)][-1]["outliers"] == 0
 
 
-@pytest.mark.parametrize("settings, message", [
-    ({"outlier_mads": 0}, "outlier_mads must be a positive number"),
-    ({"outlier_mads": float("nan")}, "outlier_mads must be a positive number"),
-    ({"outlier_mads": 3, "outlier_neighbours": 1}, "outlier_neighbours must be an integer ≥ 2"),
-])
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        ({"outlier_mads": 0}, "outlier_mads must be a positive number"),
+        ({"outlier_mads": float("nan")}, "outlier_mads must be a positive number"),
+        ({"outlier_mads": 3, "outlier_neighbours": 1}, "outlier_neighbours must be an integer ≥ 2"),
+    ],
+)
 def test_bad_settings_raise_one_line_errors(settings, message):
     with pytest.raises(ValueError, match=message):
         DistanceLearner([0.05, 0.1], **settings)

@@ -11,25 +11,45 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
-from parallax.distance import (DistanceLearner, DistanceMLP, QueueMemory, TARGET_SOURCES, TargetSource,
-                               distance_error_by_range, position_weights, register_target_source,
-                               sensitive_positions)
-from parallax.distance.synthetic import PAPER_DISTANCES_M, PAPER_LATERAL_POSITIONS_M, parallax_pans, paper_regression
+from parallax.distance import (
+    TARGET_SOURCES,
+    DistanceLearner,
+    DistanceMLP,
+    QueueMemory,
+    TargetSource,
+    distance_error_by_range,
+    position_weights,
+    register_target_source,
+    sensitive_positions,
+)
+from parallax.distance.synthetic import (
+    PAPER_DISTANCES_M,
+    PAPER_LATERAL_POSITIONS_M,
+    paper_regression,
+    parallax_pans,
+)
 from parallax.geometry import disparity_score, effective_patch_size
 
 CONFIG = Path(__file__).resolve().parents[1] / "conf" / "distance" / "mlp_lm.yaml"
 SMALL_L = [0.05, 0.10, 0.15, 0.20]
 
 
-
-
 def small_learner(**overrides) -> DistanceLearner:
-    settings = dict(lateral_positions=SMALL_L, queue_size=40, hidden=5, epochs_per_call=3, initial_epochs=20, seed=0)
+    settings = dict(
+        lateral_positions=SMALL_L,
+        queue_size=40,
+        hidden=5,
+        epochs_per_call=3,
+        initial_epochs=20,
+        seed=0,
+    )
     settings.update(overrides)
     return DistanceLearner(**settings)
 
 
-def feed(learner: DistanceLearner, pans: np.ndarray, distances: np.ndarray) -> list[dict[str, float]]:
+def feed(
+    learner: DistanceLearner, pans: np.ndarray, distances: np.ndarray
+) -> list[dict[str, float]]:
     return [learner.observe(s, d) for s, d in zip(pans, distances)]
 
 
@@ -85,7 +105,9 @@ def test_per_input_scaling_cancels_the_weighting_and_global_scaling_keeps_it():
             learner = small_learner(input_scaling=scaling, weighting=weighting)
             feed(learner, pans, distances)
             predictions[scaling, weighting] = learner.predict(probe)
-    np.testing.assert_allclose(predictions["per_input", True], predictions["per_input", False], rtol=1e-6)
+    np.testing.assert_allclose(
+        predictions["per_input", True], predictions["per_input", False], rtol=1e-6
+    )
     assert np.abs(predictions["global", True] - predictions["global", False]).max() > 1e-3
 
 
@@ -123,8 +145,8 @@ def test_a_batch_of_vectors_is_queued_in_order_then_fitted_once():
     feed(one_by_one, pans[:40], distances[:40])
     feed(batched, pans[:40], distances[:40])
     for start in (40, 48):  # two lockstep batches of B = 8 robots
-        feed(one_by_one, pans[start:start + 8], distances[start:start + 8])
-        stats = batched.observe_batch(pans[start:start + 8], distances[start:start + 8])
+        feed(one_by_one, pans[start : start + 8], distances[start : start + 8])
+        stats = batched.observe_batch(pans[start : start + 8], distances[start : start + 8])
         assert stats["trained"] == 1.0
     assert torch.equal(batched.queue.inputs, one_by_one.queue.inputs)
     assert batched.fits == 3 and one_by_one.fits == 17 and batched.observations == 56
@@ -141,11 +163,17 @@ def test_a_batch_of_vectors_is_queued_in_order_then_fitted_once():
 
 def test_learns_the_paper_regression():
     pans, distances = paper_regression(300, np.random.default_rng(0))
-    learner = DistanceLearner(PAPER_LATERAL_POSITIONS_M, queue_size=300, hidden=30, initial_epochs=60, seed=0)
+    learner = DistanceLearner(
+        PAPER_LATERAL_POSITIONS_M, queue_size=300, hidden=30, initial_epochs=60, seed=0
+    )
     stats = feed(learner, pans, distances)[-1]
     truth = np.repeat(PAPER_DISTANCES_M, 3)
-    errors = distance_error_by_range(learner.predict(parallax_pans(PAPER_LATERAL_POSITIONS_M, truth, 0.05,
-                                                                   np.random.default_rng(9))), truth)
+    errors = distance_error_by_range(
+        learner.predict(
+            parallax_pans(PAPER_LATERAL_POSITIONS_M, truth, 0.05, np.random.default_rng(9))
+        ),
+        truth,
+    )
     assert stats["trained"] == 1.0 and stats["rmse_m"] < 0.2
     assert errors["total"] < 3.0, errors  # ≈ 1 % here; the paper reports 1.3–2.7 %
 
@@ -156,10 +184,16 @@ def test_refitting_the_scaling_preserves_the_function():
     for scaling in ("global", "per_input"):
         network = DistanceMLP(4, 6, input_scaling=scaling, generator=generator)
         first = torch.rand(50, 4, generator=generator, dtype=torch.float64) * 3
-        network.fit_scaling(first, torch.rand(50, generator=generator, dtype=torch.float64) * 7 + 3, False)
+        network.fit_scaling(
+            first, torch.rand(50, generator=generator, dtype=torch.float64) * 7 + 3, False
+        )
         probe = torch.rand(20, 4, generator=generator, dtype=torch.float64) * 4
         before = network(probe).detach()
-        network.fit_scaling(first * 1.7 + 0.3, torch.rand(50, generator=generator, dtype=torch.float64) * 2 + 5, True)
+        network.fit_scaling(
+            first * 1.7 + 0.3,
+            torch.rand(50, generator=generator, dtype=torch.float64) * 2 + 5,
+            True,
+        )
         torch.testing.assert_close(network(probe).detach(), before, rtol=1e-10, atol=1e-10)
 
 
@@ -217,7 +251,9 @@ def test_resume_continues_bit_identically():
     resumed.load_state_dict(first.state_dict())
     stats = feed(resumed, pans[44:], distances[44:])
     assert stats[-1]["trained"] == 1.0
-    for (name, a), b in zip(straight.network.state_dict().items(), resumed.network.state_dict().values()):
+    for (name, a), b in zip(
+        straight.network.state_dict().items(), resumed.network.state_dict().values()
+    ):
         assert torch.equal(a, b), name
     assert torch.equal(straight.queue.inputs, resumed.queue.inputs)
     assert straight.optimizer.mu == resumed.optimizer.mu

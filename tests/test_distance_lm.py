@@ -17,19 +17,21 @@ from parallax.distance.levenberg_marquardt import _DampedSolver
 from parallax.distance.synthetic import PAPER_LATERAL_POSITIONS_M, paper_regression
 
 
-
-
 def regression(forward, inputs, targets):
     return forward(inputs) - targets
 
 
-def scaled_network(inputs: torch.Tensor, targets: torch.Tensor, hidden: int, seed: int) -> DistanceMLP:
+def scaled_network(
+    inputs: torch.Tensor, targets: torch.Tensor, hidden: int, seed: int
+) -> DistanceMLP:
     network = DistanceMLP(inputs.shape[1], hidden, generator=torch.Generator().manual_seed(seed))
     network.fit_scaling(inputs, targets, preserve_function=False)
     return network
 
 
-def minpack_sse(optimizer: LevenbergMarquardt, inputs: torch.Tensor, targets: torch.Tensor) -> float:
+def minpack_sse(
+    optimizer: LevenbergMarquardt, inputs: torch.Tensor, targets: torch.Tensor
+) -> float:
     """SSE that SciPy's MINPACK reaches from the optimiser's current parameters (left unchanged)."""
     batch = (inputs, targets)
 
@@ -40,7 +42,9 @@ def minpack_sse(optimizer: LevenbergMarquardt, inputs: torch.Tensor, targets: to
     def jacobian(flat):
         return optimizer._jacobian(torch.from_numpy(flat), regression, batch, True).numpy()
 
-    solution = least_squares(residuals, optimizer._flat().numpy().copy(), jac=jacobian, method="lm", max_nfev=5000)
+    solution = least_squares(
+        residuals, optimizer._flat().numpy().copy(), jac=jacobian, method="lm", max_nfev=5000
+    )
     assert solution.status > 0, solution.message
     return 2.0 * float(solution.cost)
 
@@ -68,11 +72,15 @@ def test_matches_minpack_on_the_paper_regression_for_most_starts():
     """One lateral position, 2 hidden units: non-convex, so ask it of the median of 5 starts."""
     ratios = []
     for seed in range(5):
-        pans, distances = paper_regression(100, np.random.default_rng(seed), lateral_positions_m=[0.10])
+        pans, distances = paper_regression(
+            100, np.random.default_rng(seed), lateral_positions_m=[0.10]
+        )
         inputs, targets = torch.from_numpy(pans), torch.from_numpy(distances)
         optimizer = LevenbergMarquardt(scaled_network(inputs, targets, hidden=2, seed=seed))
         reference = minpack_sse(optimizer, inputs, targets)
-        ratios.append(optimizer.run(regression, inputs, targets, epochs=300, per_sample=True).sse / reference)
+        ratios.append(
+            optimizer.run(regression, inputs, targets, epochs=300, per_sample=True).sse / reference
+        )
     assert statistics.median(ratios) <= 1.01, ratios
 
 
@@ -85,8 +93,9 @@ def test_beats_adam_in_the_same_wall_clock_budget():
 
     optimizer = LevenbergMarquardt(lm_network)
     # torch.func's first call in a process costs about a second; that is set-up, not optimisation
-    LevenbergMarquardt(scaled_network(inputs, targets, hidden=30, seed=1)).step(regression, inputs, targets,
-                                                                               per_sample=True)
+    LevenbergMarquardt(scaled_network(inputs, targets, hidden=30, seed=1)).step(
+        regression, inputs, targets, per_sample=True
+    )
     deadline = time.perf_counter() + budget_s
     while time.perf_counter() < deadline:
         if optimizer.step(regression, inputs, targets, per_sample=True).stop:
@@ -105,7 +114,9 @@ def test_beats_adam_in_the_same_wall_clock_budget():
 
 
 def test_per_sample_jacobian_equals_full_jacobian():
-    pans, distances = paper_regression(20, np.random.default_rng(1), lateral_positions_m=PAPER_LATERAL_POSITIONS_M[:4])
+    pans, distances = paper_regression(
+        20, np.random.default_rng(1), lateral_positions_m=PAPER_LATERAL_POSITIONS_M[:4]
+    )
     inputs, targets = torch.from_numpy(pans), torch.from_numpy(distances)
     optimizer = LevenbergMarquardt(scaled_network(inputs, targets, hidden=5, seed=1))
     flat = optimizer._flat()
@@ -133,7 +144,9 @@ def test_works_for_another_small_module_in_float32():
     model = nn.Sequential(nn.Linear(1, 8), nn.Tanh(), nn.Linear(8, 1))
     optimizer = LevenbergMarquardt(model)
     start = float((model(inputs).squeeze(-1) - targets).detach().square().sum())
-    result = optimizer.run(lambda forward, x, y: forward(x).squeeze(-1) - y, inputs, targets, epochs=100)
+    result = optimizer.run(
+        lambda forward, x, y: forward(x).squeeze(-1) - y, inputs, targets, epochs=100
+    )
     assert result.sse < 1e-3 * start
     assert all(p.dtype == torch.float32 and torch.isfinite(p).all() for p in model.parameters())
 
@@ -143,9 +156,13 @@ def test_linear_problem_stops_at_min_grad():
     inputs = torch.tensor([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, -1.0]], dtype=torch.float64)
     targets = inputs @ torch.tensor([2.0, -3.0], dtype=torch.float64) + 0.5
     optimizer = LevenbergMarquardt(model)
-    result = optimizer.run(lambda forward, x, y: forward(x).squeeze(-1) - y, inputs, targets, epochs=50)
+    result = optimizer.run(
+        lambda forward, x, y: forward(x).squeeze(-1) - y, inputs, targets, epochs=50
+    )
     assert result.stop == "min_grad" and result.epochs < 10
-    torch.testing.assert_close(model.weight.detach(), torch.tensor([[2.0, -3.0]], dtype=torch.float64))
+    torch.testing.assert_close(
+        model.weight.detach(), torch.tensor([[2.0, -3.0]], dtype=torch.float64)
+    )
 
 
 def test_failed_steps_are_rejected_and_mu_grows():
@@ -175,7 +192,9 @@ def test_overflow_never_reaches_the_parameters():
     inputs = torch.full((4, 1), 800.0, dtype=torch.float64)
     targets = torch.full((4,), 1e150, dtype=torch.float64)
     optimizer = LevenbergMarquardt(model, mu=1e-6)
-    result = optimizer.run(lambda forward, x, y: torch.exp(forward(x).squeeze(-1)) - y, inputs, targets, epochs=50)
+    result = optimizer.run(
+        lambda forward, x, y: torch.exp(forward(x).squeeze(-1)) - y, inputs, targets, epochs=50
+    )
     assert all(torch.isfinite(p).all() for p in model.parameters())
     assert result.stop in {"mu_max", "non_finite_jacobian", "min_grad"}
     assert math.isfinite(result.sse)
@@ -218,12 +237,23 @@ def test_weight_decay_finds_the_ridge_solution(per_sample):
     decay = 2.0
     model = nn.Linear(3, 1, dtype=torch.float64)
     optimizer = LevenbergMarquardt(model, weight_decay=decay)
-    result = optimizer.run(lambda forward, x, y: forward(x).squeeze(-1) - y, inputs, targets, epochs=50,
-                           per_sample=per_sample)
+    result = optimizer.run(
+        lambda forward, x, y: forward(x).squeeze(-1) - y,
+        inputs,
+        targets,
+        epochs=50,
+        per_sample=per_sample,
+    )
     design = torch.cat([inputs, torch.ones(12, 1, dtype=torch.float64)], dim=1)
-    ridge = torch.linalg.solve(design.T @ design + decay * torch.eye(4, dtype=torch.float64), design.T @ targets)
-    torch.testing.assert_close(torch.cat([model.weight.detach().reshape(-1), model.bias.detach()]), ridge,
-                               rtol=1e-6, atol=1e-6)
+    ridge = torch.linalg.solve(
+        design.T @ design + decay * torch.eye(4, dtype=torch.float64), design.T @ targets
+    )
+    torch.testing.assert_close(
+        torch.cat([model.weight.detach().reshape(-1), model.bias.detach()]),
+        ridge,
+        rtol=1e-6,
+        atol=1e-6,
+    )
     data_sse = float((model(inputs).squeeze(-1) - targets).detach().square().sum())
     assert result.sse == pytest.approx(data_sse + decay * float(ridge.square().sum()), rel=1e-9)
     with pytest.raises(ValueError, match="weight_decay must be a finite number ≥ 0, got -1"):

@@ -17,7 +17,9 @@ SMALL_STIMULI = {"count": 6}
 
 
 def small_env(seed=0, **options):
-    settings = dict(lateral_positions=[0.05, 0.1], trial_length=3, image_size=48, stimuli=SMALL_STIMULI)
+    settings = dict(
+        lateral_positions=[0.05, 0.1], trial_length=3, image_size=48, stimuli=SMALL_STIMULI
+    )
     settings.update(options)
     return parallax.envs.load(seed=seed, **settings)
 
@@ -25,7 +27,9 @@ def small_env(seed=0, **options):
 @pytest.fixture(scope="module")
 def eye_env():
     """A full-size (256 px) world for measurements in the image."""
-    env = parallax.envs.load(seed=0, lateral_positions=[0.05], image_size=256, stimuli=SMALL_STIMULI)
+    env = parallax.envs.load(
+        seed=0, lateral_positions=[0.05], image_size=256, stimuli=SMALL_STIMULI
+    )
     env.reset()
     yield env
     env.close()
@@ -38,7 +42,7 @@ def marker_centre(physics: hoap3.Physics, radius_px: float = 9.0) -> np.ndarray:
     with_marker = physics.render_left_eye(show_marker=True).astype(int)
     without = physics.render_left_eye().astype(int)
     mask = np.abs(with_marker - without).sum(axis=2) > 30
-    assert mask.sum() > 0.7 * math.pi * radius_px ** 2, "the marker is not in view"
+    assert mask.sum() > 0.7 * math.pi * radius_px**2, "the marker is not in view"
     rows, cols = np.nonzero(mask)
     return np.array([cols.mean(), rows.mean()])
 
@@ -53,7 +57,9 @@ def test_robot_has_hoap3_proportions(eye_env):
     assert pan_axis == pytest.approx([0.0, 0.0, 0.5])
     assert named.xanchor["head_tilt"] - pan_axis == pytest.approx([0.015, 0.0, 0.103])
     left, right = named.cam_xpos["left_eye"], named.cam_xpos["right_eye"]
-    assert left == pytest.approx([0.065, 0.03, 0.607]) and right == pytest.approx([0.065, -0.03, 0.607])
+    assert left == pytest.approx([0.065, 0.03, 0.607]) and right == pytest.approx(
+        [0.065, -0.03, 0.607]
+    )
     assert left == pytest.approx([hoap3.EYE_FORWARD_M, hoap3.EYE_LEFT_M, hoap3.EYE_HEIGHT_M])
     tops = [physics.named.data.geom_xpos[name][2] for name in ("skull", "foot_left")]
     assert 0.58 < tops[0] + physics.named.model.geom_size["skull"][2] < 0.66  # about 0.60 m tall
@@ -88,8 +94,10 @@ def test_rendered_disparity_at_3m_is_table_1(eye_env):
         assert round(shift) == score
 
 
-@pytest.mark.parametrize("distance,lateral", [(3.0, 0.20), (10.0, 0.05), (3.0, 0.05), (10.0, 0.20),
-                                              (6.4, 0.13), (4.2, -0.07)])
+@pytest.mark.parametrize(
+    "distance,lateral",
+    [(3.0, 0.20), (10.0, 0.05), (3.0, 0.05), (10.0, 0.20), (6.4, 0.13), (4.2, -0.07)],
+)
 def test_target_pan_puts_panel_centre_in_image_centre(eye_env, distance, lateral):
     physics = eye_env.physics
     physics.set_stimulus(1, distance)
@@ -119,11 +127,13 @@ def test_eye_sees_the_texture_upright_and_unmirrored(eye_env):
     physics.set_pan_deg(0.0)
     image = cv2.cvtColor(physics.render_left_eye(), cv2.COLOR_RGB2GRAY).astype(float)
     half_panel_px = FOCAL_LENGTH_PX * hoap3.PANEL_SIDE_M / 2 / 10.0
-    view = image[128 - 80:128 + 80, 128 - 80:128 + 80]
-    texture = cv2.cvtColor(np.ascontiguousarray(physics.stimuli.textures[2]), cv2.COLOR_RGB2GRAY).astype(float)
+    view = image[128 - 80 : 128 + 80, 128 - 80 : 128 + 80]
+    texture = cv2.cvtColor(
+        np.ascontiguousarray(physics.stimuli.textures[2]), cv2.COLOR_RGB2GRAY
+    ).astype(float)
     side = texture.shape[0]
     inner = int(round(side / 2 * 80 / half_panel_px))
-    texture = texture[side // 2 - inner:side // 2 + inner, side // 2 - inner:side // 2 + inner]
+    texture = texture[side // 2 - inner : side // 2 + inner, side // 2 - inner : side // 2 + inner]
 
     def correlation(a, b):
         a, b = cv2.resize(a, (40, 40)).ravel(), cv2.resize(b, (40, 40)).ravel()
@@ -148,7 +158,9 @@ def test_panel_covers_fine_window_at_10m_and_swaps_texture_without_recompiling(e
     changes = np.zeros(frames[0].shape[:2], dtype=bool)
     for frame in frames[1:]:
         changes |= np.abs(frame - frames[0]).sum(axis=2) > 0
-    assert changes[128 - 75:128 + 75, 128 - 75:128 + 75].all(), "the fine window sees past the panel"
+    assert changes[128 - 75 : 128 + 75, 128 - 75 : 128 + 75].all(), (
+        "the fine window sees past the panel"
+    )
     assert not changes[:20, :20].any(), "the background should not change with the texture"
 
 
@@ -181,7 +193,9 @@ def test_episode_has_r_times_th_observations_and_qp_at_last_iteration():
         expected_pan += increment
         k += 1
         assert step.discount == 1.0
-        assert step.reward == pytest.approx(-abs(step.observation["pan"] - step.observation["target_pan"]))
+        assert step.reward == pytest.approx(
+            -abs(step.observation["pan"] - step.observation["target_pan"])
+        )
     assert seen == [(p, t) for p in range(3) for t in range(4)]
     assert env.step(0.0).first()
     env.close()
@@ -208,19 +222,23 @@ def test_trials_can_start_from_a_jittered_pan_without_touching_the_reference():
         first = env.reset().observation
         starts.append(float(first["pan"]))
         env.step(0.0)
-        starts.append(float(env.step(0.0).observation["pan"]))   # the second trial's start
+        starts.append(float(env.step(0.0).observation["pan"]))  # the second trial's start
         env.step(0.0)
     assert all(-0.5 <= p <= 0.5 for p in starts) and len(set(starts)) == len(starts)
     physics = env.physics
     physics.set_lateral_position(0.0)
     physics.set_pan_deg(0.0)
-    assert np.array_equal(first["reference"], physics.render_left_eye())   # I0 is still at pan 0
+    assert np.array_equal(first["reference"], physics.render_left_eye())  # I0 is still at pan 0
     env.close()
     # no jitter draws nothing: the same textures and distances as before the option existed
     plain, zero = small_env(), small_env(initial_pan_jitter_deg=0.0)
     for _ in range(3):
         a, b = plain.reset().observation, zero.reset().observation
-        assert (a["texture_index"], a["distance"], a["pan"]) == (b["texture_index"], b["distance"], 0.0)
+        assert (a["texture_index"], a["distance"], a["pan"]) == (
+            b["texture_index"],
+            b["distance"],
+            0.0,
+        )
     plain.close()
     zero.close()
     with pytest.raises(ValueError, match="initial_pan_jitter_deg=-1"):
@@ -231,7 +249,7 @@ def test_the_start_jitter_can_be_switched_off_and_on():
     env = small_env(trial_length=2, initial_pan_jitter_deg=0.5)
     assert env.task.start_jitter_enabled
     env.task.set_start_jitter(False)
-    assert float(env.reset().observation["pan"]) == 0.0          # the paper's start
+    assert float(env.reset().observation["pan"]) == 0.0  # the paper's start
     env.task.set_start_jitter(True)
     assert float(env.reset().observation["pan"]) != 0.0
     with pytest.raises(ValueError, match="start jitter must be True or False, got 'no'"):
@@ -241,16 +259,18 @@ def test_the_start_jitter_can_be_switched_off_and_on():
 
 def test_the_start_range_can_grow_with_the_lateral_step():
     # 10°/m: ±0.5° at 5 cm, ±2° at 20 cm
-    env = small_env(trial_length=2, lateral_positions=[0.05, 0.2], initial_pan_jitter_deg_per_m=10.0)
+    env = small_env(
+        trial_length=2, lateral_positions=[0.05, 0.2], initial_pan_jitter_deg_per_m=10.0
+    )
     near, far = [], []
     for _ in range(40):
         near.append(float(env.reset().observation["pan"]))
         env.step(0.0)
-        far.append(float(env.step(0.0).observation["pan"]))   # the 20 cm trial's start
+        far.append(float(env.step(0.0).observation["pan"]))  # the 20 cm trial's start
         env.step(0.0)
     env.close()
     assert max(abs(p) for p in near) <= 0.5 and max(abs(p) for p in far) <= 2.0
-    assert max(abs(p) for p in far) > 1.0   # 40 draws in ±2°: one beyond 1° all but surely
+    assert max(abs(p) for p in far) > 1.0  # 40 draws in ±2°: one beyond 1° all but surely
     with pytest.raises(ValueError, match="initial_pan_jitter_deg_per_m=-1"):
         small_env(initial_pan_jitter_deg_per_m=-1.0)
 
@@ -272,8 +292,14 @@ def test_same_seed_same_observations_other_seed_other_sequence():
         out = []
         for _ in range(4):
             step = env.reset()
-            out.append((int(step.observation["texture_index"]), float(step.observation["distance"]),
-                        step.observation["reference"].copy(), env.step(0.1).observation["image"].copy()))
+            out.append(
+                (
+                    int(step.observation["texture_index"]),
+                    float(step.observation["distance"]),
+                    step.observation["reference"].copy(),
+                    env.step(0.1).observation["image"].copy(),
+                )
+            )
         env.close()
         return out
 
@@ -334,8 +360,9 @@ def test_blur_and_rotation_switch_on_mid_run_without_recompiling():
     inner = slice(28, 68)
 
     def match(angle):
-        warped = cv2.warpAffine(sharp, cv2.getRotationMatrix2D(centre, angle, 1.0), (96, 96),
-                                flags=cv2.INTER_LINEAR).astype(float)
+        warped = cv2.warpAffine(
+            sharp, cv2.getRotationMatrix2D(centre, angle, 1.0), (96, 96), flags=cv2.INTER_LINEAR
+        ).astype(float)
         return np.abs(warped[inner, inner] - rotated[inner, inner]).mean()
 
     # A positive rotation turns the camera clockwise about its line of sight (seen from behind it):
@@ -347,7 +374,9 @@ def test_blur_and_rotation_switch_on_mid_run_without_recompiling():
     step = env.step(0.0)
     assert np.array_equal(step.observation["image"], physics.render_left_eye())
     env.task.set_perturbation(camera_rotation_deg=0.0)
-    assert np.array_equal(physics.render_left_eye(), sharp)  # a zero increment left the view as it was
+    assert np.array_equal(
+        physics.render_left_eye(), sharp
+    )  # a zero increment left the view as it was
     env.close()
 
 
@@ -361,22 +390,25 @@ def test_rotation_about_the_vertical_axis_moves_the_target_pan():
 
 
 # --- bad input ------------------------------------------------------------------------------------
-@pytest.mark.parametrize("options,named", [
-    ({"distances": [3.0, 0.0]}, "0.0"),
-    ({"distances": [-2.0]}, "-2.0"),
-    ({"distances": [float("nan")]}, "nan"),
-    ({"distances": [float("inf")]}, "inf"),
-    ({"distances": []}, "[]"),
-    ({"lateral_positions": []}, "[]"),
-    ({"lateral_positions": [0.1, 0.05]}, "0.05"),
-    ({"lateral_positions": [0.1, 0.1]}, "0.1"),
-    ({"lateral_positions": [0.05, float("nan")]}, "nan"),
-    ({"trial_length": 1}, "trial_length=1"),
-    ({"image_size": 4}, "image_size=4"),
-    ({"rotation_axis": "sideways"}, "sideways"),
-    ({"stimuli": {"source": "web"}}, "web"),
-    ({"stimuli": {"count": 0}}, "count=0"),
-])
+@pytest.mark.parametrize(
+    "options,named",
+    [
+        ({"distances": [3.0, 0.0]}, "0.0"),
+        ({"distances": [-2.0]}, "-2.0"),
+        ({"distances": [float("nan")]}, "nan"),
+        ({"distances": [float("inf")]}, "inf"),
+        ({"distances": []}, "[]"),
+        ({"lateral_positions": []}, "[]"),
+        ({"lateral_positions": [0.1, 0.05]}, "0.05"),
+        ({"lateral_positions": [0.1, 0.1]}, "0.1"),
+        ({"lateral_positions": [0.05, float("nan")]}, "nan"),
+        ({"trial_length": 1}, "trial_length=1"),
+        ({"image_size": 4}, "image_size=4"),
+        ({"rotation_axis": "sideways"}, "sideways"),
+        ({"stimuli": {"source": "web"}}, "web"),
+        ({"stimuli": {"count": 0}}, "count=0"),
+    ],
+)
 def test_bad_options_are_refused_with_the_value_named(options, named):
     with pytest.raises(ValueError, match=None) as error:
         small_env(**options)
@@ -409,7 +441,7 @@ def test_sixteen_environments_render_in_one_process():
     assert len({id(env.physics.stimuli) for env in envs}) == 1  # textures decoded once, shared
     for _ in range(2):
         steps = [env.step(0.1) for env in envs]
-    for env, first, step in zip(envs, firsts, steps):
+    for env, _first, step in zip(envs, firsts, steps):
         image = step.observation["image"]
         assert image.shape == (48, 48, 3) and image.std() > 1
         # Interleaved rendering gives each world its own view.
@@ -442,5 +474,7 @@ def test_the_pixels_match_i0_best_at_the_target_pan():
     """The world itself puts the best image match at α* (so the pursuit MAE is the learner's)."""
     from parallax.envs.best_match import best_match_offsets
 
-    offsets = best_match_offsets(distance=10.0, lateral=0.2, textures=2, span_deg=0.5, step_deg=0.05)
+    offsets = best_match_offsets(
+        distance=10.0, lateral=0.2, textures=2, span_deg=0.5, step_deg=0.05
+    )
     assert all(abs(v) <= 0.1 for values in offsets.values() for v in values), offsets

@@ -25,8 +25,13 @@ class ConformanceTest(test_utils.EnvironmentTestMixin, absltest.TestCase):
     """dm_env's own conformance suite, over several whole episodes."""
 
     def make_object_under_test(self):
-        return parallax.envs.load(seed=1, lateral_positions=[0.05, 0.1], trial_length=3, image_size=32,
-                                  stimuli={"count": 4})
+        return parallax.envs.load(
+            seed=1,
+            lateral_positions=[0.05, 0.1],
+            trial_length=3,
+            image_size=32,
+            stimuli={"count": 4},
+        )
 
     def make_action_sequence(self):
         actions = parallax.envs.ACTION_SET_DEG
@@ -41,8 +46,17 @@ def test_environment_is_a_dm_control_environment():
     assert isinstance(env, control.Environment) and isinstance(env, dm_env.Environment)
     spec = env.action_spec()
     assert spec.shape == () and spec.minimum == -0.2 and spec.maximum == 0.2
-    assert set(env.observation_spec()) == {"reference", "image", "pan", "target_pan", "distance",
-                                           "lateral_position", "position_index", "iteration", "texture_index"}
+    assert set(env.observation_spec()) == {
+        "reference",
+        "image",
+        "pan",
+        "target_pan",
+        "distance",
+        "lateral_position",
+        "position_index",
+        "iteration",
+        "texture_index",
+    }
     env.close()
 
 
@@ -51,7 +65,9 @@ def test_shipped_config_maps_onto_load():
     kwargs = OmegaConf.to_container(cfg, resolve=True)
     # `robots` is the trainer's (how many environments to make), not an argument of load().
     assert kwargs.pop("robots") == 1
-    assert kwargs["image_size"] == 256 and kwargs["trial_length"] == 30 and kwargs["pan_reset"] is True
+    assert (
+        kwargs["image_size"] == 256 and kwargs["trial_length"] == 30 and kwargs["pan_reset"] is True
+    )
     assert parallax.envs.distance_grid(kwargs["distances"]) == parallax.envs.distance_grid(None)
     kwargs.update(image_size=32, trial_length=2)
     kwargs["stimuli"]["count"] = 3
@@ -69,11 +85,14 @@ def test_shipped_config_maps_onto_load():
 
 
 def _run_python(code: str, gl: str | None) -> subprocess.CompletedProcess:
-    environment = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")}
+    environment = {
+        k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")
+    }
     if gl is not None:
         environment["MUJOCO_GL"] = gl
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=environment,
-                          timeout=120)
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=environment, timeout=120
+    )
 
 
 RENDER_ONE = """
@@ -100,15 +119,22 @@ def test_a_backend_the_user_chose_is_respected_or_named_in_one_clear_error():
 
 def test_picture_command_writes_both_views(tmp_path):
     out = tmp_path / "pictures"
-    assert picture.main(["--out", str(out), "--distance", "4", "--lateral", "0.1", "--image-size", "64"]) == 0
+    assert (
+        picture.main(
+            ["--out", str(out), "--distance", "4", "--lateral", "0.1", "--image-size", "64"]
+        )
+        == 0
+    )
     side = cv2.imread(str(out / "scene_side.png"))
     eye = cv2.imread(str(out / "scene_left_eye.png"))
     assert side.shape[1] == picture.SIDE_SIZE[0] and side.std() > 10
     assert eye.shape[1] == 3 * 64 + 2 * 6 and eye.std() > 10
 
 
-@pytest.mark.parametrize("argv", [["--distance", "0"], ["--distance", "nan"], ["--lateral", "inf"],
-                                  ["--texture", "100000"]])
+@pytest.mark.parametrize(
+    "argv",
+    [["--distance", "0"], ["--distance", "nan"], ["--lateral", "inf"], ["--texture", "100000"]],
+)
 def test_picture_command_refuses_bad_input_and_writes_nothing(tmp_path, argv):
     out = tmp_path / "pictures"
     with pytest.raises(SystemExit) as exit_info:
@@ -119,6 +145,12 @@ def test_picture_command_refuses_bad_input_and_writes_nothing(tmp_path, argv):
 
 def test_benchmark_reports_medians():
     results = benchmark.run(repeats=3, image_size=32)
-    for key in ("render_left_eye_ms", "env_step_ms", "env_reset_ms", "target_pan_ms", "resident_mb_per_env"):
+    for key in (
+        "render_left_eye_ms",
+        "env_step_ms",
+        "env_reset_ms",
+        "target_pan_ms",
+        "resident_mb_per_env",
+    ):
         assert key in results and np.isfinite(results[key])
     assert results["render_left_eye_ms"] > 0

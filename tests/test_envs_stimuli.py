@@ -17,8 +17,16 @@ def _photo_of(name: str) -> str:
 
 
 def _thumbnails(textures: np.ndarray) -> np.ndarray:
-    small = np.stack([cv2.resize(cv2.cvtColor(np.ascontiguousarray(t), cv2.COLOR_RGB2GRAY), (24, 24),
-                                 interpolation=cv2.INTER_AREA) for t in textures]).reshape(len(textures), -1)
+    small = np.stack(
+        [
+            cv2.resize(
+                cv2.cvtColor(np.ascontiguousarray(t), cv2.COLOR_RGB2GRAY),
+                (24, 24),
+                interpolation=cv2.INTER_AREA,
+            )
+            for t in textures
+        ]
+    ).reshape(len(textures), -1)
     small = small - small.mean(axis=1, keepdims=True)
     return small / np.linalg.norm(small, axis=1, keepdims=True)
 
@@ -34,8 +42,8 @@ def test_at_least_100_distinct_training_crops_from_real_photographs():
     # Each crop really is a piece of its photograph (not noise): compare with the source pixels.
     name = train.names[0]
     photo = stimuli.photo(_photo_of(name))
-    y, x, side = (int(part.split("=")[1]) for part in name[name.index("[") + 1:-1].split(","))
-    source = cv2.resize(photo[y:y + side, x:x + side], (256, 256), interpolation=cv2.INTER_AREA)
+    y, x, side = (int(part.split("=")[1]) for part in name[name.index("[") + 1 : -1].split(","))
+    source = cv2.resize(photo[y : y + side, x : x + side], (256, 256), interpolation=cv2.INTER_AREA)
     assert np.abs(source.astype(int) - train.textures[0].astype(int)).mean() < 3
 
 
@@ -64,7 +72,9 @@ def test_a_small_set_spans_several_photographs():
 def test_user_folder_skips_unreadable_files_with_a_warning_naming_them(tmp_path):
     rng = np.random.default_rng(0)
     for k in range(3):
-        cv2.imwrite(str(tmp_path / f"img{k}.png"), rng.integers(0, 256, (40 + k, 60, 3), dtype=np.uint8))
+        cv2.imwrite(
+            str(tmp_path / f"img{k}.png"), rng.integers(0, 256, (40 + k, 60, 3), dtype=np.uint8)
+        )
     (tmp_path / "broken.jpg").write_bytes(b"not a jpeg at all")
     (tmp_path / "notes.txt").write_text("hello")
     with pytest.warns(UserWarning, match="broken.jpg.*notes.txt"):
@@ -73,7 +83,10 @@ def test_user_folder_skips_unreadable_files_with_a_warning_naming_them(tmp_path)
     assert folder.textures.shape == (3, 32, 32, 3)
     # `stimuli.dir=<folder>` on top of the shipped config (source: skimage) means the folder
     # (already decoded: the cached set comes back).
-    assert stimuli.load_stimuli({"source": "skimage", "dir": str(tmp_path), "resolution": 32}) is folder
+    assert (
+        stimuli.load_stimuli({"source": "skimage", "dir": str(tmp_path), "resolution": 32})
+        is folder
+    )
     with pytest.raises(ValueError, match="procedural"):
         stimuli.load_stimuli({"source": "procedural", "dir": str(tmp_path)})
 
@@ -103,11 +116,18 @@ def test_procedural_textures_are_deterministic_and_split(kind):
     assert all(t.std() > 20 for t in train.textures)
 
 
-@pytest.mark.parametrize("settings,named", [
-    ({"source": "flickr"}, "flickr"), ({"split": "test"}, "test"), ({"resolution": 3}, "3"),
-    ({"count": -1}, "-1"), ({"colour": "red"}, "colour"), ({"source": "dir"}, "stimuli.dir"),
-    ({"count": 400}, "400"),
-])
+@pytest.mark.parametrize(
+    "settings,named",
+    [
+        ({"source": "flickr"}, "flickr"),
+        ({"split": "test"}, "test"),
+        ({"resolution": 3}, "3"),
+        ({"count": -1}, "-1"),
+        ({"colour": "red"}, "colour"),
+        ({"source": "dir"}, "stimuli.dir"),
+        ({"count": 400}, "400"),
+    ],
+)
 def test_bad_settings_are_named(settings, named):
     with pytest.raises(ValueError) as error:
         stimuli.load_stimuli(settings)

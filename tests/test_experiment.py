@@ -13,7 +13,9 @@ from parallax.config import compose
 from parallax.experiment import Experiment
 
 
-def _presentations(overrides: list[str], chunk: int, count: int = 2, early_dictionary_step: bool = True):
+def _presentations(
+    overrides: list[str], chunk: int, count: int = 2, early_dictionary_step: bool = True
+):
     """``count`` presentations of a fresh experiment encoding ``chunk`` robots at a time (its
     dictionary steps on the helper thread from the policy's turn on, or on the caller's while the
     world renders), and the state of its coder and policy afterwards."""
@@ -46,17 +48,21 @@ def test_robots_encoded_chunk_by_chunk_give_the_numbers_of_one_batch(tiny_overri
     overrides = tiny_overrides + ["env.robots=3", "env.initial_pan_jitter_deg=1", *extra]
     one_batch = _presentations(overrides, chunk=3)
     _assert_same(_presentations(overrides, chunk=1), one_batch)
-    _assert_same(_presentations(overrides, chunk=2), one_batch)   # chunks of 2 and 1
+    _assert_same(_presentations(overrides, chunk=2), one_batch)  # chunks of 2 and 1
 
 
 @pytest.mark.parametrize(("robots", "extra"), [(1, []), (3, ["policy.feature_norm=difference"])])
-def test_the_dictionary_step_on_the_helper_thread_changes_no_number(tiny_overrides, robots, extra) -> None:
+def test_the_dictionary_step_on_the_helper_thread_changes_no_number(
+    tiny_overrides, robots, extra
+) -> None:
     overrides = tiny_overrides + [f"env.robots={robots}", "env.initial_pan_jitter_deg=1", *extra]
     on_the_caller = _presentations(overrides, chunk=2, early_dictionary_step=False)
     _assert_same(_presentations(overrides, chunk=2, early_dictionary_step=True), on_the_caller)
 
 
-def test_an_error_during_the_step_waits_for_the_dictionary_step(tiny_overrides, monkeypatch) -> None:
+def test_an_error_during_the_step_waits_for_the_dictionary_step(
+    tiny_overrides, monkeypatch
+) -> None:
     exp = Experiment(compose(tiny_overrides))
     try:
         steps = []
@@ -91,13 +97,18 @@ def test_the_coder_learns_from_chunks_as_from_their_batch(tiny_overrides) -> Non
         for exp in (first, second):
             exp.coder.set_reference(references)
         whole = first.coder(images, learn=True)
-        chunks = [second.coder.encode(images[:2], slice(0, 2)), second.coder.encode(images[2:], slice(2, 3))]
+        chunks = [
+            second.coder.encode(images[:2], slice(0, 2)),
+            second.coder.encode(images[2:], slice(2, 3)),
+        ]
         second.coder.learn_from(chunks)
         assert torch.equal(whole.state, torch.cat([c.output.state for c in chunks]))
         assert torch.equal(whole.reward, torch.cat([c.output.reward for c in chunks]))
         for name, dictionary in first.coder.dictionaries.items():
             assert torch.equal(dictionary, second.coder.dictionaries[name]), name
-        assert not torch.equal(first.coder.dictionaries["coarse"], Experiment(cfg).coder.dictionaries["coarse"])
+        assert not torch.equal(
+            first.coder.dictionaries["coarse"], Experiment(cfg).coder.dictionaries["coarse"]
+        )
     finally:
         first.close()
         second.close()
@@ -110,7 +121,7 @@ def test_a_frozen_coder_config_keeps_its_dictionaries_in_training(tiny_overrides
         exp.run_presentation(learn=True)
         for name, dictionary in exp.coder.dictionaries.items():
             assert torch.equal(dictionary, before[name]), name
-        assert exp.policy.updates.item() > 0   # the policy still learnt
+        assert exp.policy.updates.item() > 0  # the policy still learnt
     finally:
         exp.close()
 
@@ -126,7 +137,7 @@ def test_frames_rendered_from_any_thread_are_the_same(tiny_overrides) -> None:
         worker.start()
         worker.join()
         np.testing.assert_array_equal(elsewhere[0], here)
-        assert here.std() > 0   # a real picture, not a blank buffer
+        assert here.std() > 0  # a real picture, not a blank buffer
     finally:
         exp.close()
 
@@ -139,4 +150,4 @@ def test_an_error_on_the_gl_thread_reaches_the_caller() -> None:
 
     with pytest.raises(ValueError, match="from the GL thread"):
         parallax.envs.gl_thread().call(fail)
-    assert parallax.envs.gl_thread().call(lambda: 7) == 7   # and it goes on serving
+    assert parallax.envs.gl_thread().call(lambda: 7) == 7  # and it goes on serving

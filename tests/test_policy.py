@@ -12,13 +12,15 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from parallax.policy import FEATURE_NORMS, NaturalActorCritic
-from parallax.policy.synthetic_pursuit import (PursuitTaskConfig, SyntheticPursuit,
-                                               correcting_fraction, train_on_synthetic_pursuit)
+from parallax.policy.synthetic_pursuit import (
+    PursuitTaskConfig,
+    SyntheticPursuit,
+    correcting_fraction,
+    train_on_synthetic_pursuit,
+)
 
 CONFIG = Path(__file__).resolve().parents[1] / "conf" / "policy" / "nac.yaml"
 SMALL_DIM = 12
-
-
 
 
 def _policy(**overrides: object) -> NaturalActorCritic:
@@ -39,8 +41,13 @@ def _states(batch: int, seed: int, dim: int = SMALL_DIM) -> torch.Tensor:
     return torch.rand(batch, dim, generator=torch.Generator().manual_seed(seed)) * 0.5
 
 
-def _reference_step(policy: NaturalActorCritic, phi: torch.Tensor, action: int, reward: float,
-                    next_phi: torch.Tensor) -> dict[str, torch.Tensor]:
+def _reference_step(
+    policy: NaturalActorCritic,
+    phi: torch.Tensor,
+    action: int,
+    reward: float,
+    next_phi: torch.Tensor,
+) -> dict[str, torch.Tensor]:
     """Algorithm 3 for one transition, written from the equations with ψ from autograd."""
     J = (1 - policy.reward_rate) * policy.average_reward + policy.reward_rate * reward
     v = policy.critic
@@ -50,10 +57,12 @@ def _reference_step(policy: NaturalActorCritic, phi: torch.Tensor, action: int, 
     (psi,) = torch.autograd.grad(log_pi, theta)
     w = policy.advantage
     w_new = w + policy.advantage_lr * (delta * psi - psi * (psi * w).sum())
-    return dict(critic=v + policy.critic_lr * delta * phi, advantage=w_new,
-                actor=policy.actor * (1 - policy.actor_lr * policy.weight_decay)
-                + policy.actor_lr * w_new,
-                average_reward=J)
+    return dict(
+        critic=v + policy.critic_lr * delta * phi,
+        advantage=w_new,
+        actor=policy.actor * (1 - policy.actor_lr * policy.weight_decay) + policy.actor_lr * w_new,
+        average_reward=J,
+    )
 
 
 def test_compatible_features_are_the_score_of_the_softmax_policy() -> None:
@@ -63,12 +72,14 @@ def test_compatible_features_are_the_score_of_the_softmax_policy() -> None:
     policy.actor.copy_(torch.randn(policy.actor.shape, generator=torch.Generator().manual_seed(1)))
     phi = _states(1, seed=2)
     action = 5
-    policy.update(phi, torch.tensor([action]), torch.tensor([-0.8]), _states(1, seed=4),
-                  torch.tensor([True]))
+    policy.update(
+        phi, torch.tensor([action]), torch.tensor([-0.8]), _states(1, seed=4), torch.tensor([True])
+    )
     delta = -0.8 - float(policy.average_reward)
     psi = policy.advantage / (policy.advantage_lr * delta)
-    theta = (policy.actor.clone() - policy.actor_lr * policy.advantage) \
-        / (1 - policy.actor_lr * policy.weight_decay)
+    theta = (policy.actor.clone() - policy.actor_lr * policy.advantage) / (
+        1 - policy.actor_lr * policy.weight_decay
+    )
     theta.requires_grad_(True)
     log_pi = torch.log_softmax(theta @ phi[0] / 0.37, dim=0)[action]
     (gradient,) = torch.autograd.grad(log_pi, theta)
@@ -83,8 +94,9 @@ def test_single_robot_update_is_exactly_algorithm_3(norm: str) -> None:
     policy.act(_states(16, seed=8))  # gives the z-score statistics something to hold
     _randomise(policy, seed=5)
     phi, next_phi = _states(1, seed=6), _states(1, seed=7)
-    expected = _reference_step(policy, policy.features(phi)[0], 2, -0.3,
-                               policy.features(next_phi)[0])
+    expected = _reference_step(
+        policy, policy.features(phi)[0], 2, -0.3, policy.features(next_phi)[0]
+    )
     policy.update(phi, torch.tensor([2]), torch.tensor([-0.3]), next_phi, torch.tensor([True]))
     for name, value in expected.items():
         torch.testing.assert_close(getattr(policy, name), value.detach(), rtol=1e-5, atol=1e-6)
@@ -101,15 +113,17 @@ def test_batched_update_is_the_mean_of_single_robot_updates_over_valid_rows() ->
     for row in torch.nonzero(valid).flatten().tolist():
         trial = _policy()
         trial.load_state_dict(single.state_dict())
-        expected = _reference_step(trial, phi[row], int(action[row]), float(reward[row]),
-                                   next_phi[row])
+        expected = _reference_step(
+            trial, phi[row], int(action[row]), float(reward[row]), next_phi[row]
+        )
         results.append(expected)
     batched.update(phi, action, reward, next_phi, valid)
     for name in ("critic", "advantage", "actor"):
         mean = torch.stack([r[name].detach() for r in results]).mean(dim=0)
         torch.testing.assert_close(getattr(batched, name), mean, rtol=1e-5, atol=1e-6)
     expected_j = (1 - batched.reward_rate) * -0.4 + batched.reward_rate * float(
-        reward[valid].mean())
+        reward[valid].mean()
+    )
     assert float(batched.average_reward) == pytest.approx(expected_j, rel=1e-6)
 
 
@@ -118,9 +132,13 @@ def test_gated_rows_change_nothing() -> None:
     policy.act(_states(8, seed=12))
     _randomise(policy, seed=13)
     before = {k: v.clone() for k, v in policy.state_dict().items() if torch.is_tensor(v)}
-    stats = policy.update(_states(3, seed=14), torch.tensor([1, 2, 3]),
-                          torch.tensor([-1.0, -2.0, -3.0]), _states(3, seed=15),
-                          torch.zeros(3, dtype=torch.bool))
+    stats = policy.update(
+        _states(3, seed=14),
+        torch.tensor([1, 2, 3]),
+        torch.tensor([-1.0, -2.0, -3.0]),
+        _states(3, seed=15),
+        torch.zeros(3, dtype=torch.bool),
+    )
     after = policy.state_dict()
     for name, value in before.items():
         assert torch.equal(after[name], value), name
@@ -147,8 +165,9 @@ def _small_task(seed: int) -> SyntheticPursuit:
 
 
 def _task_policy(task: SyntheticPursuit, seed: int, norm: str = "zscore") -> NaturalActorCritic:
-    return NaturalActorCritic(task.config.state_dim, task.config.num_scales, seed=seed,
-                              feature_norm=norm)
+    return NaturalActorCritic(
+        task.config.state_dim, task.config.num_scales, seed=seed, feature_norm=norm
+    )
 
 
 @pytest.mark.parametrize("norm", FEATURE_NORMS)
@@ -215,10 +234,15 @@ def test_feature_normalisations() -> None:
     zscore.eval()
     zscore.act(states + 1.0)  # eval mode: the statistics must not move
     features = zscore.features(states).double() * math.sqrt(SMALL_DIM)
-    torch.testing.assert_close(features.mean(dim=0), torch.zeros(SMALL_DIM, dtype=torch.float64),
-                               atol=1e-5, rtol=0)
-    torch.testing.assert_close(features.std(dim=0, unbiased=False),
-                               torch.ones(SMALL_DIM, dtype=torch.float64), atol=1e-4, rtol=0)
+    torch.testing.assert_close(
+        features.mean(dim=0), torch.zeros(SMALL_DIM, dtype=torch.float64), atol=1e-5, rtol=0
+    )
+    torch.testing.assert_close(
+        features.std(dim=0, unbiased=False),
+        torch.ones(SMALL_DIM, dtype=torch.float64),
+        atol=1e-4,
+        rtol=0,
+    )
 
 
 def test_zscore_statistics_forget_beyond_their_horizon() -> None:
@@ -243,8 +267,9 @@ def test_learns_to_correct_a_synthetic_pursuit_offset(seed: int) -> None:
     settings = OmegaConf.to_container(OmegaConf.load(CONFIG))
     config = PursuitTaskConfig(units_per_scale=96)
     task = SyntheticPursuit(num_robots=16, config=config, seed=seed)
-    settings.update(state_dim=config.state_dim, num_scales=config.num_scales, seed=seed,
-                    reward_change_gain=0.0)
+    settings.update(
+        state_dim=config.state_dim, num_scales=config.num_scales, seed=seed, reward_change_gain=0.0
+    )
     policy = instantiate(settings)
     before = correcting_fraction(policy, task)
     curve = train_on_synthetic_pursuit(policy, task, steps=1500)
@@ -265,18 +290,21 @@ def test_config_instantiates_with_the_interface_keys() -> None:
     assert policy.action_values.tolist() == [-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2]
 
 
-@pytest.mark.parametrize("overrides, message", [
-    (dict(feature_norm="l2"), "feature_norm"),
-    (dict(state_dim=13), "num_scales"),
-    (dict(temperature=0.0), "temperature"),
-    (dict(discount=1.5), "discount"),
-    (dict(reward_rate=0.0), "reward_rate"),
-    (dict(actions=[0.1, 0.1]), "actions"),
-    (dict(critic_lr=-1.0), "critic_lr"),
-    (dict(zscore_horizon=-5), "zscore_horizon"),
-    (dict(eye_position_reference_m=-0.5), "eye_position_reference_m"),
-    (dict(eye_position_reference_m=float("nan")), "eye_position_reference_m"),
-])
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        (dict(feature_norm="l2"), "feature_norm"),
+        (dict(state_dim=13), "num_scales"),
+        (dict(temperature=0.0), "temperature"),
+        (dict(discount=1.5), "discount"),
+        (dict(reward_rate=0.0), "reward_rate"),
+        (dict(actions=[0.1, 0.1]), "actions"),
+        (dict(critic_lr=-1.0), "critic_lr"),
+        (dict(zscore_horizon=-5), "zscore_horizon"),
+        (dict(eye_position_reference_m=-0.5), "eye_position_reference_m"),
+        (dict(eye_position_reference_m=float("nan")), "eye_position_reference_m"),
+    ],
+)
 def test_bad_settings_are_refused(overrides: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         _policy(**overrides)
@@ -285,13 +313,22 @@ def test_bad_settings_are_refused(overrides: dict, message: str) -> None:
 def test_bad_inputs_are_refused() -> None:
     policy = _policy()
     phi = _states(2, seed=50)
-    good = dict(phi=phi, action=torch.tensor([0, 1]), reward=torch.tensor([-0.1, -0.2]),
-                next_phi=phi, valid=torch.tensor([True, True]))
+    good = dict(
+        phi=phi,
+        action=torch.tensor([0, 1]),
+        reward=torch.tensor([-0.1, -0.2]),
+        next_phi=phi,
+        valid=torch.tensor([True, True]),
+    )
     with pytest.raises(ValueError, match="phi"):
         policy.act(phi[:, :5])
-    for name, bad in [("action", torch.tensor([0, 7])), ("action", torch.tensor([0.0, 1.0])),
-                      ("valid", torch.tensor([1, 1])), ("reward", torch.tensor([-0.1])),
-                      ("next_phi", torch.full((2, SMALL_DIM), float("nan")))]:
+    for name, bad in [
+        ("action", torch.tensor([0, 7])),
+        ("action", torch.tensor([0.0, 1.0])),
+        ("valid", torch.tensor([1, 1])),
+        ("reward", torch.tensor([-0.1])),
+        ("next_phi", torch.full((2, SMALL_DIM), float("nan"))),
+    ]:
         with pytest.raises(ValueError, match=name):
             policy.update(**{**good, name: bad})
 
@@ -314,7 +351,9 @@ def test_difference_features_vanish_at_the_reference_and_stay_bounded() -> None:
     assert float(features.norm(dim=1).max()) <= 1 + 1e-6
     # a difference smaller than the running mean norm is scaled, not stretched to unit length
     small = differences[:1] * 0.01
-    torch.testing.assert_close(policy.features(small).double(), small.double() / mean_norm, rtol=1e-5, atol=0)
+    torch.testing.assert_close(
+        policy.features(small).double(), small.double() / mean_norm, rtol=1e-5, atol=0
+    )
 
 
 def test_eye_position_feature_is_the_implied_nearness_and_bypasses_the_normaliser() -> None:
@@ -324,14 +363,20 @@ def test_eye_position_feature_is_the_implied_nearness_and_bypasses_the_normalise
     lateral, distance = 0.05, 4.0
     on_target = math.degrees(math.atan(lateral / distance))
     nu = policy.eye_position_feature(torch.tensor([on_target, 0.0, -on_target, 30.0]), lateral)
-    torch.testing.assert_close(nu.squeeze(1).double(), torch.tensor([0.5 / distance, 0.0, -0.5 / distance, 1.0],
-                                                                     dtype=torch.float64), rtol=1e-6, atol=1e-7)
+    torch.testing.assert_close(
+        nu.squeeze(1).double(),
+        torch.tensor([0.5 / distance, 0.0, -0.5 / distance, 1.0], dtype=torch.float64),
+        rtol=1e-6,
+        atol=1e-7,
+    )
     assert policy.eye_position_feature(torch.tensor([3.0]), 0.0).item() == 0.0
     theta = _states(3, seed=60) - _states(3, seed=61)
     states = torch.cat([theta, nu[:3]], dim=1)
     policy.act(states)
     # the running norm sees θ alone, and ν passes through unchanged
-    assert float(policy.normalizer.norm_mean) == pytest.approx(float(theta.double().norm(dim=1).mean()), rel=1e-6)
+    assert float(policy.normalizer.norm_mean) == pytest.approx(
+        float(theta.double().norm(dim=1).mean()), rel=1e-6
+    )
     features = policy.features(states)
     torch.testing.assert_close(features[:, -1], nu[:3, 0])
     torch.testing.assert_close(features[:, :-1], policy.normalizer(theta))
@@ -339,16 +384,28 @@ def test_eye_position_feature_is_the_implied_nearness_and_bypasses_the_normalise
         policy.act(theta)
     # its weight learns like any other: a rewarded step from a state with ν ≠ 0 moves it
     before = policy.actor[:, -1].clone()
-    policy.update(states, torch.tensor([6, 6, 6]), torch.tensor([1.0, 1.0, 1.0]), states,
-                  torch.tensor([True, True, True]))
-    policy.update(states, torch.tensor([6, 6, 6]), torch.tensor([1.0, 1.0, 1.0]), states,
-                  torch.tensor([True, True, True]))
+    policy.update(
+        states,
+        torch.tensor([6, 6, 6]),
+        torch.tensor([1.0, 1.0, 1.0]),
+        states,
+        torch.tensor([True, True, True]),
+    )
+    policy.update(
+        states,
+        torch.tensor([6, 6, 6]),
+        torch.tensor([1.0, 1.0, 1.0]),
+        states,
+        torch.tensor([True, True, True]),
+    )
     assert not torch.equal(policy.actor[:, -1], before)
 
 
 def test_reward_change_feature_is_the_signed_relative_change_and_bypasses_the_normaliser() -> None:
     # Beyond the paper: g = clip(gain·(r_t − r_{t−1})/|r_{t−1}|·sign(a_{t−1}), −1, 1), after ν.
-    policy = _policy(feature_norm="difference", eye_position_reference_m=0.5, reward_change_gain=10.0)
+    policy = _policy(
+        feature_norm="difference", eye_position_reference_m=0.5, reward_change_gain=10.0
+    )
     assert policy.input_dim == SMALL_DIM + 2 and policy.actor.shape == (7, SMALL_DIM + 2)
     rewards = torch.tensor([-0.97, -0.97, -0.97, -1.03, -0.5, -0.8])
     previous = torch.tensor([-1.0, -1.0, -1.0, -1.0, -1.0, -0.8])
@@ -356,8 +413,9 @@ def test_reward_change_feature_is_the_signed_relative_change_and_bypasses_the_no
     g = policy.reward_change_feature(rewards, previous, increments).squeeze(1).double()
     # +3 % after a left step → +0.3; after a right step → −0.3; no step → 0; −3 % after a left
     # step → −0.3; +50 % → clipped to 1; no change → 0
-    torch.testing.assert_close(g, torch.tensor([0.3, -0.3, 0.0, -0.3, 1.0, 0.0], dtype=torch.float64),
-                               rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(
+        g, torch.tensor([0.3, -0.3, 0.0, -0.3, 1.0, 0.0], dtype=torch.float64), rtol=1e-5, atol=1e-6
+    )
     assert _policy(reward_change_gain=0.0).input_dim == SMALL_DIM
     with pytest.raises(ValueError, match="reward_change_gain"):
         _policy(reward_change_gain=-1.0)
@@ -365,13 +423,25 @@ def test_reward_change_feature_is_the_signed_relative_change_and_bypasses_the_no
     extra = torch.tensor([[0.1, 0.3], [0.2, -1.0], [0.0, 0.0]])
     states = torch.cat([theta, extra], dim=1)
     policy.act(states)
-    assert float(policy.normalizer.norm_mean) == pytest.approx(float(theta.double().norm(dim=1).mean()), rel=1e-6)
+    assert float(policy.normalizer.norm_mean) == pytest.approx(
+        float(theta.double().norm(dim=1).mean()), rel=1e-6
+    )
     features = policy.features(states)
     torch.testing.assert_close(features[:, -2:], extra)
     # its weight learns: a rewarded step from states with g ≠ 0 moves the last column
     before = policy.actor[:, -1].clone()
-    policy.update(states, torch.tensor([6, 6, 6]), torch.tensor([1.0, 1.0, 1.0]), states,
-                  torch.ones(3, dtype=torch.bool))
-    policy.update(states, torch.tensor([6, 6, 6]), torch.tensor([1.0, 1.0, 1.0]), states,
-                  torch.ones(3, dtype=torch.bool))
+    policy.update(
+        states,
+        torch.tensor([6, 6, 6]),
+        torch.tensor([1.0, 1.0, 1.0]),
+        states,
+        torch.ones(3, dtype=torch.bool),
+    )
+    policy.update(
+        states,
+        torch.tensor([6, 6, 6]),
+        torch.tensor([1.0, 1.0, 1.0]),
+        states,
+        torch.ones(3, dtype=torch.bool),
+    )
     assert not torch.equal(policy.actor[:, -1], before)

@@ -16,9 +16,16 @@ def perturbed_run(tmp_path_factory):
     from tests.conftest import train_tiny_run
 
     # 8 presentations, queue c = 3, weighting on, perturbation from presentation 4
-    return train_tiny_run(tmp_path_factory.mktemp("run"), [
-        "train.presentations=8", "distance.weighting=true", "distance.y=1.0",
-        "perturbation=rotate_blur", "perturbation.start_fraction=0.5"])
+    return train_tiny_run(
+        tmp_path_factory.mktemp("run"),
+        [
+            "train.presentations=8",
+            "distance.weighting=true",
+            "distance.y=1.0",
+            "perturbation=rotate_blur",
+            "perturbation.start_fraction=0.5",
+        ],
+    )
 
 
 def test_replay_as_trained_is_bit_identical(perturbed_run):
@@ -27,8 +34,9 @@ def test_replay_as_trained_is_bit_identical(perturbed_run):
     assert trained["distance_error"], "the tiny run must have made online predictions"
     # compared as JSON text: empty ranges are NaN, and NaN != NaN
     assert json.dumps(result["distance_error"]) == json.dumps(trained["distance_error"])
-    assert (json.dumps(result["before_perturbation"]["distance_error"])
-            == json.dumps(trained["before_perturbation"]["distance_error"]))
+    assert json.dumps(result["before_perturbation"]["distance_error"]) == json.dumps(
+        trained["before_perturbation"]["distance_error"]
+    )
     assert result["mae_per_position"] == trained["mae_per_position"]
 
 
@@ -47,18 +55,28 @@ def test_the_best_reward_readout_trains_and_replays_exactly(perturbed_run, tmp_p
     # the other readout must give exactly the run trained with it.
     from tests.conftest import train_tiny_run
 
-    best_run = train_tiny_run(tmp_path / "best", [
-        "train.presentations=8", "distance.weighting=true", "distance.y=1.0",
-        "perturbation=rotate_blur", "perturbation.start_fraction=0.5", "train.distance_readout=best_reward"])
+    best_run = train_tiny_run(
+        tmp_path / "best",
+        [
+            "train.presentations=8",
+            "distance.weighting=true",
+            "distance.y=1.0",
+            "perturbation=rotate_blur",
+            "perturbation.start_fraction=0.5",
+            "train.distance_readout=best_reward",
+        ],
+    )
     trained = json.loads((best_run / "summary.json").read_text())
     last = json.loads((perturbed_run / "summary.json").read_text())
-    assert trained["mae_per_position"] == last["mae_per_position"]          # the same eye
+    assert trained["mae_per_position"] == last["mae_per_position"]  # the same eye
     assert json.dumps(trained["distance_error"]) != json.dumps(last["distance_error"])
     replayed = replay(perturbed_run, ["train.distance_readout=best_reward"])["summary"]
     assert json.dumps(replayed["distance_error"]) == json.dumps(trained["distance_error"])
     records = [json.loads(line) for line in (best_run / "metrics.jsonl").read_text().splitlines()]
     assert all(len(r["best_pans"][0]) == len(r["pans"][0]) for r in records)
-    with pytest.raises(ReplayError, match="train.distance_readout must be one of last, best_reward, got 'peak'"):
+    with pytest.raises(
+        ReplayError, match="train.distance_readout must be one of last, best_reward, got 'peak'"
+    ):
         replay(perturbed_run, ["train.distance_readout=peak"])
 
 
@@ -69,7 +87,9 @@ def test_until_perturbation_is_the_unperturbed_run(perturbed_run):
     assert cut["summary"]["presentations"] == before["presentations"] == 4
     assert json.dumps(cut["summary"]["distance_error"]) == json.dumps(before["distance_error"])
     assert cut["summary"]["mae_per_position"] == before["mae_per_position"]
-    assert cut["config"].train.presentations == 4 and cut["config"].perturbation.start_fraction is None
+    assert (
+        cut["config"].train.presentations == 4 and cut["config"].perturbation.start_fraction is None
+    )
     assert cut["config"].perturbation.camera_rotation_deg == 0.0
 
 
@@ -96,9 +116,13 @@ def test_bad_overrides_are_refused_with_the_value():
         parse_sweep(["train.presentations=4"])
     # the readout only picks which logged pan builds s, so the command line sweeps it too
     assert parse_sweep(["train.distance_readout=best_reward,last"]) == [
-        ["train.distance_readout=best_reward"], ["train.distance_readout=last"]]
+        ["train.distance_readout=best_reward"],
+        ["train.distance_readout=last"],
+    ]
     assert parse_sweep(["distance.y=1,2", "distance.weighting=false"]) == [
-        ["distance.y=1", "distance.weighting=false"], ["distance.y=2", "distance.weighting=false"]]
+        ["distance.y=1", "distance.weighting=false"],
+        ["distance.y=2", "distance.weighting=false"],
+    ]
 
 
 def test_run_directories_named_with_equals_signs_are_paths(perturbed_run, tmp_path):
@@ -117,18 +141,35 @@ def test_replayed_learners_are_scored_on_the_evals_eye_movements(perturbed_run, 
     from parallax.evaluate import evaluate
 
     after = evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5])
-    before = evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5], out=perturbed_run / "eval_before",
-                      checkpoint_name="checkpoint_before_perturbation.pt")
+    before = evaluate(
+        perturbed_run,
+        distances=[4.0, 6.0],
+        between=[5.5],
+        out=perturbed_run / "eval_before",
+        checkpoint_name="checkpoint_before_perturbation.pt",
+    )
     assert len(after["distance"]["samples"]["pans"]) == 2
     # as trained: the replayed learners are the run's own, so the evals come back unchanged
     same = replay(perturbed_run)["evals"]
     assert json.dumps(same["eval.json"]["distance"]) == json.dumps(after["distance"])
-    assert json.dumps(same["eval_before/eval.json"]["distance_between_grid"]) == json.dumps(before["distance_between_grid"])
+    assert json.dumps(same["eval_before/eval.json"]["distance_between_grid"]) == json.dumps(
+        before["distance_between_grid"]
+    )
     # cut at the perturbation, the before-eval becomes the run's final eval
-    main([str(perturbed_run), "--out", str(tmp_path / "out"), "--until-perturbation", "distance.queue_size=3"])
+    main(
+        [
+            str(perturbed_run),
+            "--out",
+            str(tmp_path / "out"),
+            "--until-perturbation",
+            "distance.queue_size=3",
+        ]
+    )
     (written,) = list((tmp_path / "out").rglob("eval.json"))
     assert written.parent.name == "distance.queue_size=3"
-    assert json.loads(written.read_text())["distance"]["by_range"] == pytest.approx(before["distance"]["by_range"], nan_ok=True)
+    assert json.loads(written.read_text())["distance"]["by_range"] == pytest.approx(
+        before["distance"]["by_range"], nan_ok=True
+    )
     from parallax.report import load_run
 
     assert load_run(written.parent).final_eval() is not None
@@ -145,7 +186,7 @@ def test_the_cli_prints_each_runs_totals_and_their_spread(perturbed_run, tmp_pat
 
     if not (perturbed_run / "eval.json").is_file():
         evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5])
-    twin = tmp_path / "twin"   # the same run under a second name: two sources, equal totals
+    twin = tmp_path / "twin"  # the same run under a second name: two sources, equal totals
     twin.symlink_to(perturbed_run, target_is_directory=True)
     main([str(perturbed_run), str(twin), "--out", str(tmp_path / "out"), "distance.queue_size=3"])
     lines = capsys.readouterr().out.splitlines()
@@ -162,7 +203,9 @@ def test_evals_without_a_ready_learner_still_give_their_eye_movements():
 
     kept = {"pans": [[0.1, 0.2]], "distances": [4.0]}
     assert _eval_samples({"greedy_samples": {"grid": kept, "between": kept}}) == {
-        "distance": kept, "distance_between_grid": kept}
+        "distance": kept,
+        "distance_between_grid": kept,
+    }
     assert _eval_samples({"distance": {"by_range": {}, "samples": kept}}) == {"distance": kept}
     assert _eval_samples({"mae": {}}) == {}
 
@@ -192,5 +235,7 @@ def test_replayed_checkpoints_hold_the_replayed_learner(perturbed_run, tmp_path)
     rescored = json.loads((other / "eval.json").read_text())["distance"]
     fresh = evaluate(other, distances=[4.0, 6.0], between=[5.5], out=tmp_path / "fresh")["distance"]
     assert fresh["by_range"] == pytest.approx(rescored["by_range"], nan_ok=True)
-    trained = evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5], out=tmp_path / "trained")["distance"]
-    assert fresh["per_distance"] != trained["per_distance"]   # c = 4 is another learner
+    trained = evaluate(
+        perturbed_run, distances=[4.0, 6.0], between=[5.5], out=tmp_path / "trained"
+    )["distance"]
+    assert fresh["per_distance"] != trained["per_distance"]  # c = 4 is another learner

@@ -29,10 +29,18 @@ RANGES = paper.DISTANCE_RANGES
 def _phase(rng: np.random.Generator, labels: list[str], presentations: int) -> dict:
     mae_per_position = {k: float(rng.uniform(0.05, 0.6)) for k in labels}
     return {
-        "presentations": presentations, "trials": presentations * len(labels),
-        "mae": float(np.mean(list(mae_per_position.values()))), "mae_per_position": mae_per_position,
-        "last_trials": {k: {"mean": float(rng.uniform(0.05, 0.6)), "var": float(rng.uniform(0.01, 0.2)),
-                            "trials": 100} for k in labels},
+        "presentations": presentations,
+        "trials": presentations * len(labels),
+        "mae": float(np.mean(list(mae_per_position.values()))),
+        "mae_per_position": mae_per_position,
+        "last_trials": {
+            k: {
+                "mean": float(rng.uniform(0.05, 0.6)),
+                "var": float(rng.uniform(0.01, 0.2)),
+                "trials": 100,
+            }
+            for k in labels
+        },
         "distance_error": {r: float(rng.uniform(0.5, 8.0)) for r in RANGES},
     }
 
@@ -47,29 +55,52 @@ def write_run(run_dir: Path, cfg, seed: int, rng: np.random.Generator) -> dict:
     total = int(cfg.train.presentations)
     start = cfg.perturbation.start_fraction
     switch = None if start is None else int(round(float(start) * total))
-    summary = {"curriculum": cfg.curriculum.name, "lateral_positions_cm": labels, "seed": seed, "robots": 1,
-               "steps": total * len(labels) * 30, **_phase(rng, labels, total),
-               "before_perturbation": None if switch is None else _phase(rng, labels, switch),
-               "timing": {"wall_time_s": float(rng.uniform(10, 20)), "steps_per_second": 100.0}}
+    summary = {
+        "curriculum": cfg.curriculum.name,
+        "lateral_positions_cm": labels,
+        "seed": seed,
+        "robots": 1,
+        "steps": total * len(labels) * 30,
+        **_phase(rng, labels, total),
+        "before_perturbation": None if switch is None else _phase(rng, labels, switch),
+        "timing": {"wall_time_s": float(rng.uniform(10, 20)), "steps_per_second": 100.0},
+    }
     (run_dir / "summary.json").write_text(json.dumps(summary))
     with (run_dir / "metrics.jsonl").open("w") as log:
         for p in range(1, total + 1):
-            record = {"presentation": p, "steps": p * len(labels) * 30, "perturbed": switch is not None and p >= switch,
-                      "mae": float(rng.uniform(0.1, 1.0)),
-                      "mae_per_position": {k: float(rng.uniform(0.1, 1.0)) for k in labels}}
+            record = {
+                "presentation": p,
+                "steps": p * len(labels) * 30,
+                "perturbed": switch is not None and p >= switch,
+                "mae": float(rng.uniform(0.1, 1.0)),
+                "mae_per_position": {k: float(rng.uniform(0.1, 1.0)) for k in labels},
+            }
             log.write(json.dumps(record) + "\n")
     return summary
 
 
-def write_eval(run_dir: Path, rng: np.random.Generator, presentations: int, perturbed: bool,
-               sub: str | None = None) -> dict:
+def write_eval(
+    run_dir: Path,
+    rng: np.random.Generator,
+    presentations: int,
+    perturbed: bool,
+    sub: str | None = None,
+) -> dict:
     distances = [3.0, 4.0, 5.5, 7.0, 9.9]
     per_distance = {f"{d:.2f}": float(rng.uniform(0.5, 6)) for d in distances}
-    result = {"presentations": presentations, "perturbed": perturbed,
-              "mae": {"greedy": float(rng.uniform(0.1, 0.3)), "sampled": float(rng.uniform(0.2, 0.4))},
-              "distance": {"by_range": {r: float(rng.uniform(0.5, 6)) for r in RANGES}, "per_distance": per_distance},
-              "distance_between_grid": {"by_range": {r: float(rng.uniform(0.5, 6)) for r in RANGES},
-                                        "per_distance": {"3.05": 2.0, "7.33": 3.0}}}
+    result = {
+        "presentations": presentations,
+        "perturbed": perturbed,
+        "mae": {"greedy": float(rng.uniform(0.1, 0.3)), "sampled": float(rng.uniform(0.2, 0.4))},
+        "distance": {
+            "by_range": {r: float(rng.uniform(0.5, 6)) for r in RANGES},
+            "per_distance": per_distance,
+        },
+        "distance_between_grid": {
+            "by_range": {r: float(rng.uniform(0.5, 6)) for r in RANGES},
+            "per_distance": {"3.05": 2.0, "7.33": 3.0},
+        },
+    }
     out = run_dir / sub if sub else run_dir
     out.mkdir(exist_ok=True)
     (out / "eval.json").write_text(json.dumps(result))
@@ -106,7 +137,10 @@ def paper_sweep(tmp_path_factory) -> dict:
     summaries: dict[str, list[dict]] = {}
     evals: dict[str, list[tuple[dict, dict]]] = {}
     names = [f"paper_single_{l}" for l in paper.TABLE_POSITIONS_CM] + [
-        "paper_multi_5_10", "paper_multi_5_20", "paper_multi_5_20_weighted"]
+        "paper_multi_5_10",
+        "paper_multi_5_20",
+        "paper_multi_5_20_weighted",
+    ]
     for name in names:
         cfg = compose([f"experiment={name}", "train.presentations=10"])
         for seed in range(3):
@@ -127,8 +161,10 @@ def test_paper_tables_put_ours_beside_the_published_numbers(paper_sweep, tmp_pat
     table2 = table_block(markdown, "**Table 2**")
     for position in paper.TABLE_POSITIONS_CM:
         row = row_of(table2, position)
-        single = [s["before_perturbation"]["last_trials"][position]["mean"]
-                  for s in summaries[f"paper_single_{position}"]]
+        single = [
+            s["before_perturbation"]["last_trials"][position]["mean"]
+            for s in summaries[f"paper_single_{position}"]
+        ]
         assert row[1].startswith(cell_text(single)) and "n=3" in row[1]
         theirs = paper.TABLE2[paper.SINGLE][position]
         assert row[2] == f"{theirs[0]:.2f} ({theirs[1]:.2f})"
@@ -136,7 +172,10 @@ def test_paper_tables_put_ours_beside_the_published_numbers(paper_sweep, tmp_pat
     # 13 cm is not in the 5–10 cm list: the paper has "-" and so do we
     assert row_of(table2, "13")[3:5] == ["not run", "-"]
     # Mult. 5–20: weighted and unweighted groups both fit; the weighted (the paper's model) is shown
-    mult = [s["before_perturbation"]["last_trials"]["15"]["mean"] for s in summaries["paper_multi_5_20_weighted"]]
+    mult = [
+        s["before_perturbation"]["last_trials"]["15"]["mean"]
+        for s in summaries["paper_multi_5_20_weighted"]
+    ]
     assert row_of(table2, "15")[5].startswith(cell_text(mult))
     assert "5-20" in markdown and "not shown" in markdown
 
@@ -150,16 +189,23 @@ def test_paper_tables_put_ours_beside_the_published_numbers(paper_sweep, tmp_pat
     # and the table says so.
     table4 = table_block(markdown, "**Table 4**")
     weighted = row_of(table4, paper.WEIGHTING_5_20)
-    weighted_online = [s["before_perturbation"]["distance_error"] for s in summaries["paper_multi_5_20_weighted"]]
+    weighted_online = [
+        s["before_perturbation"]["distance_error"] for s in summaries["paper_multi_5_20_weighted"]
+    ]
     for i, r in enumerate(RANGES):
         assert weighted[3 + i].startswith(cell_text([e[r] for e in weighted_online]))
         assert f"({paper.TABLE4[paper.WEIGHTING_5_20][r]:.2f})" in weighted[3 + i]
     assert "online" in weighted[-1]
     unweighted = row_of(table4, paper.NO_WEIGHTING_5_20)
-    online = [s["before_perturbation"]["distance_error"]["total"] for s in summaries["paper_multi_5_20"]]
+    online = [
+        s["before_perturbation"]["distance_error"]["total"] for s in summaries["paper_multi_5_20"]
+    ]
     assert unweighted[6].startswith(cell_text(online)) and "online" in unweighted[-1]
-    verdict = "better than" if statistics.fmean([e["total"] for e in weighted_online]) < statistics.fmean(online) \
+    verdict = (
+        "better than"
+        if statistics.fmean([e["total"] for e in weighted_online]) < statistics.fmean(online)
         else "not better than"
+    )
     assert f"is {verdict} without weighting" in markdown
 
     # with the unweighted row out of the picture, the weighted row's evals are used
@@ -168,19 +214,29 @@ def test_paper_tables_put_ours_beside_the_published_numbers(paper_sweep, tmp_pat
         if "paper_multi_5_20_weighted" in run.name:
             shutil.copytree(run, only_weighted / run.name)
     alone, _ = build_report([only_weighted], tmp_path / "alone", tables="paper")
-    before_evals = [b["distance"]["by_range"] for b, _ in paper_sweep["evals"]["paper_multi_5_20_weighted"]]
+    before_evals = [
+        b["distance"]["by_range"] for b, _ in paper_sweep["evals"]["paper_multi_5_20_weighted"]
+    ]
     row = row_of(table_block(alone, "**Table 4**"), paper.WEIGHTING_5_20)
     assert row[3 + RANGES.index("total")].startswith(cell_text([e["total"] for e in before_evals]))
     assert "held-out" in row[-1]
     table5 = table_block(alone, "**Table 5**")
-    after_evals = [a["distance"]["by_range"]["7-10"] for _, a in paper_sweep["evals"]["paper_multi_5_20_weighted"]]
+    after_evals = [
+        a["distance"]["by_range"]["7-10"]
+        for _, a in paper_sweep["evals"]["paper_multi_5_20_weighted"]
+    ]
     assert row_of(table5, paper.WEIGHTING_5_20)[5].startswith(cell_text(after_evals))
 
     # the small JSON holds the same numbers, the figures exist
     saved = json.loads((out / "results.json").read_text())
     total = saved["paper"]["table4"]["rows"][paper.WEIGHTING_5_20]["ours"]["total"]
-    assert total["n"] == 3 and total["mean"] == pytest.approx(statistics.fmean(e["total"] for e in weighted_online))
-    assert saved["paper"]["table2"]["cells"][paper.SINGLE]["5"]["paper"] == {"mean": 0.18, "var": 0.10}
+    assert total["n"] == 3 and total["mean"] == pytest.approx(
+        statistics.fmean(e["total"] for e in weighted_online)
+    )
+    assert saved["paper"]["table2"]["cells"][paper.SINGLE]["5"]["paper"] == {
+        "mean": 0.18,
+        "var": 0.10,
+    }
     assert (out / "README.md").read_text() == markdown
     for png in saved["figures"]:
         assert (out / png).stat().st_size > 1000
@@ -194,7 +250,9 @@ def test_prefer_decides_which_of_two_fitting_groups_fills_the_paper_tables(tmp_p
     root = tmp_path / "runs"
     totals: dict[str, list[float]] = {}
     for y in ("1.0", "0.1"):
-        cfg = compose(["experiment=paper_multi_5_20_weighted", "train.presentations=10", f"distance.y={y}"])
+        cfg = compose(
+            ["experiment=paper_multi_5_20_weighted", "train.presentations=10", f"distance.y={y}"]
+        )
         for seed in range(3):
             run_dir = root / f"y={y},seed={seed}"
             write_run(run_dir, cfg, seed, rng)
@@ -211,7 +269,8 @@ def test_prefer_decides_which_of_two_fitting_groups_fills_the_paper_tables(tmp_p
         main([str(root), "--prefer", "distance.y=0.3"])
     assert exc.value.code == 2
     assert capsys.readouterr().err.strip() == (
-        "parallax-report: error: --prefer distance.y=0.3: no group of runs has that setting")
+        "parallax-report: error: --prefer distance.y=0.3: no group of runs has that setting"
+    )
     with pytest.raises(SystemExit):
         main([str(root), "--prefer", "distance.y"])
     assert "expected KEY=VALUE" in capsys.readouterr().err
@@ -242,7 +301,9 @@ def test_ablation_tables_failed_jobs_and_duplicates(tmp_path):
     (refused / ".hydra" / "overrides.yaml").write_text("- distance.y=-1\n- seed=0\n")
 
     out = tmp_path / "docs"
-    markdown, results = build_report([sweep, other_sweep], out, name="ablations.md", tables="ablation")
+    markdown, results = build_report(
+        [sweep, other_sweep], out, name="ablations.md", tables="ablation"
+    )
 
     y_table = table_block(markdown, "**Ablation: `distance.y`**")
     assert [row_of(y_table, v)[0] for v in ("0.5", "1.0 (baseline)", "2.0")]
@@ -257,7 +318,7 @@ def test_ablation_tables_failed_jobs_and_duplicates(tmp_path):
     assert len(weighting_table.splitlines()) == 2 + 2
     assert row_of(weighting_table, "False")[-1] == "online, training textures"
 
-    failed = markdown[markdown.index("## Failed or unfinished jobs"):]
+    failed = markdown[markdown.index("## Failed or unfinished jobs") :]
     assert "w=True,y=4.0,seed=0" in failed and "failed or unfinished" in failed
     assert "w=True,y=-1,seed=0" in failed and "distance.y=-1 seed=0" in failed
     assert "Duplicates left out" in markdown and "again" in markdown
@@ -290,7 +351,9 @@ def test_report_reads_real_training_runs(tmp_path, tiny_overrides):
     assert row[1].startswith(cell_text(before)) and row[2] == "0.18 (0.10)"
     after = [s["last_trials"]["5"]["mean"] for s in summaries]
     assert row_of(table_block(markdown, "**Table 3**"), "5")[1].startswith(cell_text(after))
-    assert re.search(r"seed=3 \| failed or unfinished: no summary.json; 6 of 6 presentations logged", markdown)
+    assert re.search(
+        r"seed=3 \| failed or unfinished: no summary.json; 6 of 6 presentations logged", markdown
+    )
     assert (tmp_path / "out" / "mae_g01.png").is_file()
 
 
@@ -317,17 +380,24 @@ def test_paper_results_are_the_papers_tables():
 
     def lines_after(title: str) -> list[str]:
         start = text.index(title)
-        return text[start:start + 1000].splitlines()
+        return text[start : start + 1000].splitlines()
 
-    for title, table in (("Table 2: Performance", paper.TABLE2), ("Table 3: Performance", paper.TABLE3)):
+    for title, table in (
+        ("Table 2: Performance", paper.TABLE2),
+        ("Table 3: Performance", paper.TABLE3),
+    ):
         lines = lines_after(title)
         for position in paper.TABLE_POSITIONS_CM:
             cells = next(l for l in lines if l.split("\t")[0] == position).split("\t")[1:]
             for column, cell in zip(paper.EYE_MOVEMENT_COLUMNS, cells):
                 found = re.fullmatch(r"([\d.]+) \(([\d.]+)\)", cell.strip())
-                assert (None if found is None else (float(found[1]), float(found[2]))) == table[column][position]
+                assert (None if found is None else (float(found[1]), float(found[2]))) == table[
+                    column
+                ][position]
     for title, table in (("Table 4: Average", paper.TABLE4), ("Table 5: Average", paper.TABLE5)):
         lines = lines_after(title)
         for row, published in table.items():
             line = next(l for l in lines if l.startswith(row))
-            assert [float(x) for x in re.findall(r"([\d.]+)%", line)] == [published[r] for r in RANGES]
+            assert [float(x) for x in re.findall(r"([\d.]+)%", line)] == [
+                published[r] for r in RANGES
+            ]

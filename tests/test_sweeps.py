@@ -24,8 +24,9 @@ from parallax.trainer import Trainer
 
 REPO = Path(__file__).resolve().parents[1]
 EXPERIMENTS = sorted(p.stem for p in (REPO / "conf" / "experiment").glob("*.yaml"))
-LAUNCH_SCRIPTS = sorted(p.name for p in (REPO / "launch").glob("ablation_*.sh") if p.name != "ablation_lib.sh") \
-    + ["reproduce.sh"]
+LAUNCH_SCRIPTS = sorted(
+    p.name for p in (REPO / "launch").glob("ablation_*.sh") if p.name != "ablation_lib.sh"
+) + ["reproduce.sh"]
 
 
 def _name_without(overrides: list[str]) -> str:
@@ -34,14 +35,29 @@ def _name_without(overrides: list[str]) -> str:
     return "hydra.job.config.override_dirname.exclude_keys=[" + ",".join(dict.fromkeys(keys)) + "]"
 
 
-def _sweep(sweep_dir: str, overrides: list[str], launcher: list[str], cwd: Path) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "parallax.train", "-m", *overrides, "seed=0,1", *launcher,
-           f"hydra.sweep.dir={sweep_dir}", _name_without(overrides)]
-    return subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+def _sweep(
+    sweep_dir: str, overrides: list[str], launcher: list[str], cwd: Path
+) -> subprocess.Popen:
+    cmd = [
+        sys.executable,
+        "-m",
+        "parallax.train",
+        "-m",
+        *overrides,
+        "seed=0,1",
+        *launcher,
+        f"hydra.sweep.dir={sweep_dir}",
+        _name_without(overrides),
+    ]
+    return subprocess.Popen(
+        cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
 
 
 def _summaries(sweep_dir: Path) -> dict[str, dict]:
-    return {p.parent.name: json.loads(p.read_text()) for p in sorted(sweep_dir.glob("*/summary.json"))}
+    return {
+        p.parent.name: json.loads(p.read_text()) for p in sorted(sweep_dir.glob("*/summary.json"))
+    }
 
 
 def _reference_metrics(overrides: list[str], run_dir: Path) -> str:
@@ -55,6 +71,7 @@ def _reference_metrics(overrides: list[str], run_dir: Path) -> str:
 
 # --- configs -------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("experiment", EXPERIMENTS)
 def test_experiment_files_compose_and_validate(experiment):
     cfg = compose([f"experiment={experiment}"])
@@ -62,7 +79,10 @@ def test_experiment_files_compose_and_validate(experiment):
     if experiment.startswith("paper_"):
         # the budget is sized on the command line (launch/reproduce.sh passes it through)
         assert cfg.train.presentations == compose([]).train.presentations
-        assert cfg.perturbation.start_fraction is not None and cfg.perturbation.camera_rotation_deg == 15.0
+        assert (
+            cfg.perturbation.start_fraction is not None
+            and cfg.perturbation.camera_rotation_deg == 15.0
+        )
         assert cfg.perturbation.blur_sigma == 2.0
 
 
@@ -73,13 +93,19 @@ def test_paper_experiments_cover_tables_2_to_5():
     lists = {}
     for experiment in (e for e in EXPERIMENTS if e.startswith("paper_")):
         cfg = compose([f"experiment={experiment}"])
-        lists[experiment] = (tuple(position_label(l) for l in cfg.curriculum.lateral_positions), cfg.distance.weighting)
-    assert {labels for labels, _ in lists.values() if len(labels) == 1} == {(p,) for p in paper.TABLE_POSITIONS_CM}
+        lists[experiment] = (
+            tuple(position_label(l) for l in cfg.curriculum.lateral_positions),
+            cfg.distance.weighting,
+        )
+    assert {labels for labels, _ in lists.values() if len(labels) == 1} == {
+        (p,) for p in paper.TABLE_POSITIONS_CM
+    }
     assert set(paper.DISTANCE_ROWS.values()) <= set(lists.values())
 
 
 def _hydra_config(overrides: list[str]):
-    from hydra import compose as hydra_compose, initialize_config_module
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_module
     from hydra.core.global_hydra import GlobalHydra
 
     register_resolvers()
@@ -98,7 +124,9 @@ def test_slurm_launcher_config_and_a_local_site_file_make_the_sbatch_script(tmp_
 
     site = tmp_path / "site" / "hydra" / "launcher"
     site.mkdir(parents=True)
-    (site / "local_test.yaml").write_text("defaults:\n  - slurm\n  - _self_\npartition: cpu_test\naccount: proj\n")
+    (site / "local_test.yaml").write_text(
+        "defaults:\n  - slurm\n  - _self_\npartition: cpu_test\naccount: proj\n"
+    )
     fake_bin = tmp_path / "bin"
     fake_bin.mkdir()
     (fake_bin / "srun").write_text("#!/bin/sh\nexit 1\n")
@@ -109,8 +137,13 @@ def test_slurm_launcher_config_and_a_local_site_file_make_the_sbatch_script(tmp_
     assert plain.hydra.launcher._target_.endswith("SlurmLauncher")
     assert plain.hydra.launcher.cpus_per_task == 1 and plain.hydra.launcher.partition is None
 
-    cfg = _hydra_config([f"hydra.searchpath=[file://{tmp_path / 'site'}]", "hydra/launcher=local_test",
-                         f"hydra.sweep.dir={tmp_path / 'sweep'}"])
+    cfg = _hydra_config(
+        [
+            f"hydra.searchpath=[file://{tmp_path / 'site'}]",
+            "hydra/launcher=local_test",
+            f"hydra.sweep.dir={tmp_path / 'sweep'}",
+        ]
+    )
     HydraConfig.instance().set_config(cfg)
     launcher = instantiate(cfg.hydra.launcher)
     launcher.config = cfg
@@ -125,17 +158,29 @@ def test_slurm_launcher_config_and_a_local_site_file_make_the_sbatch_script(tmp_
     slurm = captured["executor"]._executor
     assert captured["jobs"] == 2 and slurm.max_num_timeout == 5
     sbatch = slurm._make_submission_file_text("python -m submitit.core._submit x", "uid")
-    for line in ("--partition=cpu_test", "--account=proj", "--cpus-per-task=1", "--mem=4GB", "--time=240",
-                 "--signal=USR2@120"):
+    for line in (
+        "--partition=cpu_test",
+        "--account=proj",
+        "--cpus-per-task=1",
+        "--mem=4GB",
+        "--time=240",
+        "--signal=USR2@120",
+    ):
         assert f"#SBATCH {line}" in sbatch
     assert str(tmp_path / "sweep" / ".submitit") in sbatch
 
 
 # --- sweeps ----------------------------------------------------------------------------------
 
+
 def test_joblib_sweep_runs_two_jobs(tmp_path, tiny_overrides):
     sweep_dir = tmp_path / "sweep"
-    proc = _sweep(str(sweep_dir), tiny_overrides, ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"], tmp_path)
+    proc = _sweep(
+        str(sweep_dir),
+        tiny_overrides,
+        ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"],
+        tmp_path,
+    )
     out, _ = proc.communicate(timeout=600)
     assert proc.returncode == 0, out[-3000:]
     summaries = _summaries(sweep_dir)
@@ -158,16 +203,24 @@ def _children(pid: int) -> list[int]:
     return found
 
 
-@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="finds the submitit task through /proc")
+@pytest.mark.skipif(
+    not Path("/proc/self/stat").exists(), reason="finds the submitit task through /proc"
+)
 def test_submitit_local_sweep_survives_a_requeue(tmp_path, tiny_overrides):
     """Two jobs with submitit_local; job seed=0 is preempted (USR2, as SLURM does) half-way.
     submitit requeues it with the sweep directory already resolved — the `${now:…}` in its name
     is not evaluated again — and the trainer resumes from the checkpoint: the requeued run's log
     equals an uninterrupted run's, and the sweep has one dated folder."""
-    overrides = [o for o in tiny_overrides if not o.startswith(("train.presentations", "train.checkpoint_every"))]
+    overrides = [
+        o
+        for o in tiny_overrides
+        if not o.startswith(("train.presentations", "train.checkpoint_every"))
+    ]
     overrides += ["train.presentations=16", "train.checkpoint_every=1"]
     root = tmp_path / "multirun"
-    proc = _sweep(str(root) + "/${now:%H-%M-%S-%f}", overrides, ["hydra/launcher=submitit_local"], tmp_path)
+    proc = _sweep(
+        str(root) + "/${now:%H-%M-%S-%f}", overrides, ["hydra/launcher=submitit_local"], tmp_path
+    )
     preempted = None
     deadline = time.time() + 300
     while proc.poll() is None and preempted is None and time.time() < deadline:
@@ -195,13 +248,20 @@ def test_submitit_local_sweep_survives_a_requeue(tmp_path, tiny_overrides):
 
 # --- launch scripts ----------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("script", LAUNCH_SCRIPTS)
 def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path):
     path = REPO / "launch" / script
     subprocess.run(["bash", "-n", str(path)], check=True)
     env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
-    result = subprocess.run(["bash", str(path), "train.presentations=7"], cwd=tmp_path, env=env,
-                            capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        ["bash", str(path), "train.presentations=7"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     sweeps = [l for l in lines if l.startswith("parallax-train -m ")]
@@ -218,9 +278,18 @@ def test_a_bad_job_fails_alone_in_a_joblib_sweep(tmp_path, tiny_overrides):
     """One job with an invalid value must not take the launcher's other jobs down with it."""
     sweep_dir = tmp_path / "sweep"
     overrides = [o for o in tiny_overrides if not o.startswith("distance.queue_size")]
-    cmd = [sys.executable, "-m", "parallax.train", "-m", *overrides, "distance.queue_size=3,0",
-           "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", f"hydra.sweep.dir={sweep_dir}",
-           _name_without(overrides)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "parallax.train",
+        "-m",
+        *overrides,
+        "distance.queue_size=3,0",
+        "hydra/launcher=joblib",
+        "hydra.launcher.n_jobs=2",
+        f"hydra.sweep.dir={sweep_dir}",
+        _name_without(overrides),
+    ]
     proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert proc.returncode != 0  # the sweep reports the failure …
     assert "distance.queue_size" in proc.stdout + proc.stderr
@@ -233,24 +302,48 @@ def test_a_bad_job_fails_alone_in_a_joblib_sweep(tmp_path, tiny_overrides):
 def test_distance_ablations_replay_their_source_runs(script, tmp_path):
     """y and c only change the distance learner: the scripts replay logged eye movements."""
     env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
-    trained = subprocess.run(["bash", str(REPO / "launch" / script)], cwd=tmp_path, env=env,
-                             capture_output=True, text=True, timeout=60)
+    trained = subprocess.run(
+        ["bash", str(REPO / "launch" / script)],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     replays = [l for l in trained.stdout.splitlines() if l.startswith("parallax-replay ")]
-    assert replays and all(f"{tmp_path}/ablation_distance_source --out" in l for l in replays), trained.stdout
+    assert replays and all(f"{tmp_path}/ablation_distance_source --out" in l for l in replays), (
+        trained.stdout
+    )
     assert all("--until-perturbation" in l for l in replays)
     (tmp_path / "runs" / "a").mkdir(parents=True)
     (tmp_path / "runs" / "b").mkdir()
-    given = subprocess.run(["bash", str(REPO / "launch" / script)], cwd=tmp_path,
-                           env={**env, "SOURCE": f"{tmp_path}/runs/*"}, capture_output=True, text=True, timeout=60)
+    given = subprocess.run(
+        ["bash", str(REPO / "launch" / script)],
+        cwd=tmp_path,
+        env={**env, "SOURCE": f"{tmp_path}/runs/*"},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     lines = given.stdout.splitlines()
     assert not [l for l in lines if l.startswith("parallax-train")], given.stdout
-    assert all(f"{tmp_path}/runs/a {tmp_path}/runs/b --out" in l for l in lines if l.startswith("parallax-replay"))
+    assert all(
+        f"{tmp_path}/runs/a {tmp_path}/runs/b --out" in l
+        for l in lines
+        if l.startswith("parallax-replay")
+    )
 
 
 def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_path):
     env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
-    result = subprocess.run(["bash", str(REPO / "launch" / "ablations.sh")], cwd=tmp_path, env=env,
-                            capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        ["bash", str(REPO / "launch" / "ablations.sh")],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     trained = [l for l in lines if l.startswith("parallax-train -m ")]

@@ -38,10 +38,12 @@ def test_recomputed_targets_agree_with_the_trainers_log(tiny_run, tmp_path):
 def test_threshold_decides_and_needs_enough_trials(tiny_run):
     worst = max(ttl.recent_mae_per_position(tiny_run, trials=2)[-1]["mae"].values())
     reached = ttl.time_to_learn(tiny_run, threshold=worst + 10.0, trials=2)
-    assert reached["presentation"] == 2 and reached["steps"] > 0   # the first with 2 trials each
+    assert reached["presentation"] == 2 and reached["steps"] > 0  # the first with 2 trials each
     assert reached["wall_time_s"] is not None and reached["wall_time_s"] > 0
     never = ttl.time_to_learn(tiny_run, threshold=1e-9, trials=2)
-    assert never["presentation"] is None and never["worst_position_at_end"]["mae_deg"] == pytest.approx(worst)
+    assert never["presentation"] is None and never["worst_position_at_end"][
+        "mae_deg"
+    ] == pytest.approx(worst)
 
 
 def test_a_run_copied_without_its_tensorboard_folder_has_no_wall_time(tiny_run, tmp_path):
@@ -69,7 +71,7 @@ def test_spread_mean_is_the_tables_mean_and_counts_runaways(tiny_run):
     assert spread.keys() == recent.keys()
     for k, v in spread.items():
         assert v["mean"] == pytest.approx(recent[k]) and v["trials"] == 3
-        assert v["runaway_share"] == 1.0          # every trial is off by more than 0°
+        assert v["runaway_share"] == 1.0  # every trial is off by more than 0°
     none_off = ttl.last_trials_spread(tiny_run, trials=3, runaway_deg=1e9)
     assert all(v["runaway_share"] == 0.0 for v in none_off.values())
     assert all(np.isnan(v["past_share"]) for v in none_off.values())
@@ -84,17 +86,22 @@ def test_spread_mean_is_the_tables_mean_and_counts_runaways(tiny_run):
 def test_pooled_spread_is_over_every_runs_last_trials(tiny_run, tmp_path, capsys):
     single = ttl.last_trials_spread(tiny_run, trials=3)
     twice = ttl.pooled_spread([tiny_run, tiny_run], trials=3)
-    for k, v in twice.items():   # the same trials twice: same statistics, twice the count
+    for k, v in twice.items():  # the same trials twice: same statistics, twice the count
         assert v["mean"] == pytest.approx(single[k]["mean"]) and v["trials"] == 6
         assert v["median"] == pytest.approx(single[k]["median"])
     out = tmp_path / "pooled.json"
-    assert ttl.main([str(tiny_run), str(tiny_run), "--trials", "3", "--pooled", "--json", str(out)]) == 0
+    assert (
+        ttl.main([str(tiny_run), str(tiny_run), "--trials", "3", "--pooled", "--json", str(out)])
+        == 0
+    )
     assert "all 2 runs together:" in capsys.readouterr().out
     assert json.loads(out.read_text())["pooled"].keys() == single.keys()
     # runs of other lateral positions are refused, in one line
     other = tmp_path / "other"
     other.mkdir()
-    (other / "config.yaml").write_text((tiny_run / "config.yaml").read_text().replace("- 0.1", "- 0.15"))
+    (other / "config.yaml").write_text(
+        (tiny_run / "config.yaml").read_text().replace("- 0.1", "- 0.15")
+    )
     (other / "metrics.jsonl").write_text((tiny_run / "metrics.jsonl").read_text())
     with pytest.raises(ValueError, match="lateral positions"):
         ttl.pooled_spread([tiny_run, other], trials=3)
@@ -116,4 +123,7 @@ def test_batched_robots_fill_the_window_b_trials_per_presentation(tmp_path):
     run = train_tiny_run(tmp_path / "b2", ["env.robots=2", "train.presentations=3"])
     # 2 robots: 4 trials per position after 2 presentations
     assert ttl.time_to_learn(run, threshold=1e9, trials=4)["presentation"] == 2
-    assert ttl.learning_curve(run, trials=4)["robot_iterations"][0] == 2 * ttl.recent_mae_per_position(run)[0]["steps"]
+    assert (
+        ttl.learning_curve(run, trials=4)["robot_iterations"][0]
+        == 2 * ttl.recent_mae_per_position(run)[0]["steps"]
+    )

@@ -42,12 +42,26 @@ def test_run_writes_everything(tmp_path, tiny_overrides):
     assert (tmp_path / "checkpoint.pt").is_file()
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    events = EventAccumulator(str(tmp_path / "tb"), size_guidance={"scalars": 0, "images": 0}).Reload()
+    events = EventAccumulator(
+        str(tmp_path / "tb"), size_guidance={"scalars": 0, "images": 0}
+    ).Reload()
     scalars = set(events.Tags()["scalars"])
-    assert {"coder/reward", "coder/error_coarse", "coder/error_fine", "pursuit/mae", "pursuit/mae_5cm",
-            "pursuit/mae_10cm", "policy/entropy", "perf/steps_per_second", "distance/error_pct_total",
-            "distance/lm_loss", "distance/lm_mu"} <= scalars, scalars
-    assert {"coder/atoms_coarse", "coder/atoms_fine", "world/I0_beside_It"} <= set(events.Tags()["images"])
+    assert {
+        "coder/reward",
+        "coder/error_coarse",
+        "coder/error_fine",
+        "pursuit/mae",
+        "pursuit/mae_5cm",
+        "pursuit/mae_10cm",
+        "policy/entropy",
+        "perf/steps_per_second",
+        "distance/error_pct_total",
+        "distance/lm_loss",
+        "distance/lm_mu",
+    } <= scalars, scalars
+    assert {"coder/atoms_coarse", "coder/atoms_fine", "world/I0_beside_It"} <= set(
+        events.Tags()["images"]
+    )
     assert len(events.Scalars("pursuit/mae")) == 6
     assert "pursuit/mae_recent" in scalars
     # mae_window=20 trials, summary_trials=100: after 12 trials both cover every trial so far
@@ -64,15 +78,23 @@ def test_same_seed_same_metrics_other_seed_differs(tmp_path, tiny_overrides):
     a = _train(tmp_path / "a", tiny_overrides + ["seed=3"])
     b = _train(tmp_path / "b", tiny_overrides + ["seed=3"])
     c = _train(tmp_path / "c", tiny_overrides + ["seed=4"])
-    assert (tmp_path / "a" / "metrics.jsonl").read_text() == (tmp_path / "b" / "metrics.jsonl").read_text()
+    assert (tmp_path / "a" / "metrics.jsonl").read_text() == (
+        tmp_path / "b" / "metrics.jsonl"
+    ).read_text()
     assert _without_timing(a) == _without_timing(b)
     assert _without_timing(a) != _without_timing(c)
 
 
-@pytest.mark.parametrize("extra", [[], ["policy.feature_norm=difference"],
-                                   # the jitter ends after the resume point: the resumed run must switch it off
-                                   ["env.initial_pan_jitter_deg=1", "train.start_jitter_presentations=5"]],
-                         ids=["shipped", "difference", "jitter_until_5"])
+@pytest.mark.parametrize(
+    "extra",
+    [
+        [],
+        ["policy.feature_norm=difference"],
+        # the jitter ends after the resume point: the resumed run must switch it off
+        ["env.initial_pan_jitter_deg=1", "train.start_jitter_presentations=5"],
+    ],
+    ids=["shipped", "difference", "jitter_until_5"],
+)
 def test_resume_in_process_matches_uninterrupted(tmp_path, tiny_overrides, extra):
     # feature_norm=difference adds one (I0, I0) encode per trial; still same seed, same numbers
     tiny_overrides = tiny_overrides + extra
@@ -81,35 +103,50 @@ def test_resume_in_process_matches_uninterrupted(tmp_path, tiny_overrides, extra
     # continuing the same run directory with the full budget
     resumed = _train(tmp_path / "part", tiny_overrides)
     assert _without_timing(resumed) == _without_timing(full)
-    assert ((tmp_path / "part" / "metrics.jsonl").read_text()
-            == (tmp_path / "full" / "metrics.jsonl").read_text())
+    assert (tmp_path / "part" / "metrics.jsonl").read_text() == (
+        tmp_path / "full" / "metrics.jsonl"
+    ).read_text()
 
 
-def test_a_finished_run_lengthened_after_its_perturbation_matches_the_longer_run(tmp_path, tiny_overrides):
+def test_a_finished_run_lengthened_after_its_perturbation_matches_the_longer_run(
+    tmp_path, tiny_overrides
+):
     # §5's continuation made longer: a 4-presentation run perturbed from presentation 2 on, then
     # the same directory with 6 presentations and the start fraction that keeps presentation 2
     perturbed = tiny_overrides + ["perturbation=rotate_blur"]
     longer = perturbed + ["perturbation.start_fraction=0.3333"]
     full = _train(tmp_path / "full", longer)
-    _train(tmp_path / "part", perturbed + ["train.presentations=4", "perturbation.start_fraction=0.5"])
+    _train(
+        tmp_path / "part", perturbed + ["train.presentations=4", "perturbation.start_fraction=0.5"]
+    )
     resumed = _train(tmp_path / "part", longer)
     assert _without_timing(resumed) == _without_timing(full)
     assert resumed["before_perturbation"]["presentations"] == 2
-    assert ((tmp_path / "part" / "metrics.jsonl").read_text()
-            == (tmp_path / "full" / "metrics.jsonl").read_text())
+    assert (tmp_path / "part" / "metrics.jsonl").read_text() == (
+        tmp_path / "full" / "metrics.jsonl"
+    ).read_text()
 
 
 def test_the_start_jitter_ends_after_start_jitter_presentations(tmp_path, tiny_overrides):
-    _train(tmp_path, tiny_overrides + ["env.initial_pan_jitter_deg=1", "train.start_jitter_presentations=4"])
+    _train(
+        tmp_path,
+        tiny_overrides + ["env.initial_pan_jitter_deg=1", "train.start_jitter_presentations=4"],
+    )
     records = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
     assert [r["start_jitter"] for r in records] == [True] * 4 + [False] * 2
     jittered = [p for r in records[:4] for p in r["start_pans"][0]]
     assert all(-1.0 <= p <= 1.0 for p in jittered) and len(set(jittered)) == len(jittered)
-    assert all(p == 0.0 for r in records[4:] for p in r["start_pans"][0])   # the paper's start
+    assert all(p == 0.0 for r in records[4:] for p in r["start_pans"][0])  # the paper's start
     # parallax-eval starts its trials as the end of training did, unless told otherwise
     from parallax.evaluate import evaluate
-    assert evaluate(tmp_path, distances=[3.0], between=[], out=tmp_path / "e1")["start_jitter"] is False
-    jittered = evaluate(tmp_path, distances=[3.0, 5.0], between=[], out=tmp_path / "e2", start_jitter="on")
+
+    assert (
+        evaluate(tmp_path, distances=[3.0], between=[], out=tmp_path / "e1")["start_jitter"]
+        is False
+    )
+    jittered = evaluate(
+        tmp_path, distances=[3.0, 5.0], between=[], out=tmp_path / "e2", start_jitter="on"
+    )
     assert jittered["start_jitter"] is True
     split = jittered["mae_by_start"]["sampled"]
     assert 0.0 <= split["share_started_past"] <= 1.0 and split["started_short"] >= 0.0
@@ -119,13 +156,16 @@ def test_the_start_jitter_ends_after_start_jitter_presentations(tmp_path, tiny_o
 
 def test_mae_by_start_splits_trials_by_the_side_they_started_on():
     from parallax.evaluate import mae_by_start
+
     # α* = +1° (first robot) and −1° (second, the mirror case); each starts past once and short once
-    run = {"targets": np.array([[1.0, 1.0], [-1.0, -1.0]]),
-           "start_pans": np.array([[1.5, 0.0], [-0.5, -2.0]]),
-           "pans": np.array([[3.0, 1.1], [-1.2, -1.0]])}
+    run = {
+        "targets": np.array([[1.0, 1.0], [-1.0, -1.0]]),
+        "start_pans": np.array([[1.5, 0.0], [-0.5, -2.0]]),
+        "pans": np.array([[3.0, 1.1], [-1.2, -1.0]]),
+    }
     split = mae_by_start(run)
     assert split["share_started_past"] == 0.5
-    assert split["started_past"] == pytest.approx((2.0 + 0.0) / 2)    # 1.5 and −2.0 started past
+    assert split["started_past"] == pytest.approx((2.0 + 0.0) / 2)  # 1.5 and −2.0 started past
     assert split["started_short"] == pytest.approx((0.1 + 0.2) / 2)
 
 
@@ -139,8 +179,9 @@ def test_resume_drops_a_torn_log_line(tmp_path, tiny_overrides):
     with (tmp_path / "part" / "metrics.jsonl").open("a") as log:
         log.write('{"presentation": 5, "ste')  # a hard kill in the middle of a write
     _train(tmp_path / "part", tiny_overrides)
-    assert ((tmp_path / "part" / "metrics.jsonl").read_text()
-            == (tmp_path / "full" / "metrics.jsonl").read_text())
+    assert (tmp_path / "part" / "metrics.jsonl").read_text() == (
+        tmp_path / "full" / "metrics.jsonl"
+    ).read_text()
 
 
 def test_sigkill_then_resume_gives_the_same_summary(tmp_path, tiny_overrides):
@@ -148,8 +189,9 @@ def test_sigkill_then_resume_gives_the_same_summary(tmp_path, tiny_overrides):
     ref = tmp_path / "ref"
     subprocess.run(_cli(ref, overrides), check=True, capture_output=True, timeout=600, cwd=tmp_path)
     killed = tmp_path / "killed"
-    proc = subprocess.Popen(_cli(killed, overrides), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            cwd=tmp_path)
+    proc = subprocess.Popen(
+        _cli(killed, overrides), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path
+    )
     deadline = time.time() + 300
     # kill once some presentations are done, somewhere in the middle of the run
     while time.time() < deadline and proc.poll() is None:
@@ -161,7 +203,9 @@ def test_sigkill_then_resume_gives_the_same_summary(tmp_path, tiny_overrides):
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     assert not (killed / "summary.json").exists()
-    subprocess.run(_cli(killed, overrides), check=True, capture_output=True, timeout=600, cwd=tmp_path)
+    subprocess.run(
+        _cli(killed, overrides), check=True, capture_output=True, timeout=600, cwd=tmp_path
+    )
     a = json.loads((ref / "summary.json").read_text())
     b = json.loads((killed / "summary.json").read_text())
     assert _without_timing(a) == _without_timing(b)
@@ -169,7 +213,9 @@ def test_sigkill_then_resume_gives_the_same_summary(tmp_path, tiny_overrides):
 
 
 def test_perturbation_switches_on_mid_run(tmp_path, tiny_overrides):
-    summary = _train(tmp_path, tiny_overrides + ["perturbation=rotate_blur", "perturbation.start_fraction=0.5"])
+    summary = _train(
+        tmp_path, tiny_overrides + ["perturbation=rotate_blur", "perturbation.start_fraction=0.5"]
+    )
     records = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
     # presentations 1-3 ran unperturbed, 4-6 perturbed
     assert [r["perturbed"] for r in records] == [False, False, False, True, True, True]
@@ -177,8 +223,13 @@ def test_perturbation_switches_on_mid_run(tmp_path, tiny_overrides):
     assert (tmp_path / "checkpoint_before_perturbation.pt").is_file()
     from parallax.evaluate import evaluate
 
-    before = evaluate(tmp_path, distances=[4.0], between=[], out=tmp_path / "eval_before",
-                      checkpoint_name="checkpoint_before_perturbation.pt")
+    before = evaluate(
+        tmp_path,
+        distances=[4.0],
+        between=[],
+        out=tmp_path / "eval_before",
+        checkpoint_name="checkpoint_before_perturbation.pt",
+    )
     after = evaluate(tmp_path, distances=[4.0], between=[])
     assert before["perturbed"] is False and before["presentations"] == 3
     assert after["perturbed"] is True and after["presentations"] == 6
@@ -186,8 +237,12 @@ def test_perturbation_switches_on_mid_run(tmp_path, tiny_overrides):
 
 def test_staged_curriculum_widens_the_list(tmp_path, tiny_overrides):
     overrides = tiny_overrides + [
-        "curriculum=staged", "curriculum.lateral_positions=[0.05,0.1]",
-        "curriculum.stages=[[0.05],[0.05,0.1]]", "curriculum.advance_below_deg=100", "curriculum.min_trials=2"]
+        "curriculum=staged",
+        "curriculum.lateral_positions=[0.05,0.1]",
+        "curriculum.stages=[[0.05],[0.05,0.1]]",
+        "curriculum.advance_below_deg=100",
+        "curriculum.min_trials=2",
+    ]
     _train(tmp_path, overrides)
     records = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
     assert records[0]["stage"] == 0 and records[-1]["stage"] == 1
@@ -214,10 +269,17 @@ def test_eval_writes_json_and_figures(tmp_path, tiny_overrides):
         assert evaluate(tmp_path, distances=[3.0], between=[], device="cpu")["mae"]
         config.write_text(config.read_text().replace("device: cuda", "device: cpu"))
     # beyond the paper: s read where the coder's reward was highest in each trial
-    best = evaluate(tmp_path, distances=[3.0, 6.5, 10.0], between=[], out=tmp_path / "best",
-                    readout="best_reward")
+    best = evaluate(
+        tmp_path,
+        distances=[3.0, 6.5, 10.0],
+        between=[],
+        out=tmp_path / "best",
+        readout="best_reward",
+    )
     assert best["readout"] == "best_reward" and result["readout"] == "last"
-    assert best["greedy_samples"]["grid"]["distances"] == result["greedy_samples"]["grid"]["distances"]
+    assert (
+        best["greedy_samples"]["grid"]["distances"] == result["greedy_samples"]["grid"]["distances"]
+    )
     with pytest.raises(ValueError, match="--readout must be one of last, best_reward, got 'peak'"):
         evaluate(tmp_path, distances=[3.0], readout="peak")
 
@@ -229,14 +291,19 @@ def test_best_pans_are_the_pans_where_the_reward_peaked(tmp_path, tiny_overrides
     trainer = Trainer(cfg, tmp_path)
     exp = trainer.exp
     physics = exp.envs[0].physics
-    seen = []   # (position index, pan, reward) of every encoded image
+    seen = []  # (position index, pan, reward) of every encoded image
     encode = type(exp.coder).encode
 
     def recording_encode(self, images, robots=slice(None)):
         encoding = encode(self, images, robots)
         if images.shape[0] == 1 and not torch.equal(images, self._last_reference):
-            seen.append((round(physics.lateral_position(), 6), physics.pan_deg(),
-                         float(encoding.output.reward[0])))
+            seen.append(
+                (
+                    round(physics.lateral_position(), 6),
+                    physics.pan_deg(),
+                    float(encoding.output.reward[0]),
+                )
+            )
         return encoding
 
     set_reference = type(exp.coder).set_reference
@@ -253,8 +320,8 @@ def test_best_pans_are_the_pans_where_the_reward_peaked(tmp_path, tiny_overrides
         exp.close()
     for p, lateral in enumerate(pres.lateral_positions):
         trial = [(pan, reward) for l, pan, reward in seen if l == round(lateral, 6)]
-        assert len(trial) == 4                                     # env.trial_length
-        expected = max(trial, key=lambda pr: pr[1])[0]             # max() keeps the first on ties
+        assert len(trial) == 4  # env.trial_length
+        expected = max(trial, key=lambda pr: pr[1])[0]  # max() keeps the first on ties
         assert pres.best_pans[0, p] == pytest.approx(expected, abs=1e-9)
         assert pres.pans[0, p] == pytest.approx(trial[-1][0], abs=1e-9)
 
@@ -269,6 +336,7 @@ def test_a_stop_signal_during_a_checkpoint_write_waits_for_the_rename(tmp_path):
     seen = []
     old = sig.signal(sig.SIGUSR2, lambda *_: seen.append((tmp_path / "c.pt").exists()))
     try:
+
         class Raise:  # pickled by torch.save: raises the signal in the middle of the write
             def __reduce__(self):
                 os.kill(os.getpid(), sig.SIGUSR2)
@@ -290,22 +358,38 @@ def test_resuming_with_other_settings_is_refused_and_loses_nothing(tmp_path, tin
     overrides = tiny_overrides + ["train.presentations=1"]
     _train(run, overrides)
     saved = load_run_config(run)
-    assert changed_settings(saved, compose(overrides + ["train.presentations=5", "train.threads=2"])) == []
+    assert (
+        changed_settings(saved, compose(overrides + ["train.presentations=5", "train.threads=2"]))
+        == []
+    )
     assert changed_settings(saved, compose(overrides + ["coder.learning_rate=0.3"])) == [
-        "coder.learning_rate: 0.01 → 0.3"]
+        "coder.learning_rate: 0.01 → 0.3"
+    ]
     before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
-    cli = [sys.executable, "-m", "parallax.train", *overrides, "coder.learning_rate=0.3", f"hydra.run.dir={run}"]
+    cli = [
+        sys.executable,
+        "-m",
+        "parallax.train",
+        *overrides,
+        "coder.learning_rate=0.3",
+        f"hydra.run.dir={run}",
+    ]
     proc = subprocess.run(cli, capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert proc.returncode == 2
     errors = [line for line in proc.stderr.splitlines() if line.startswith("parallax-train: error")]
     assert len(errors) == 1 and "coder.learning_rate: 0.01 → 0.3" in errors[0]
-    assert all((run / name).read_bytes() == data for name, data in before.items())  # Hydra may add train.log
-
+    assert all(
+        (run / name).read_bytes() == data for name, data in before.items()
+    )  # Hydra may add train.log
 
 
 def test_difference_states_change_the_run(tmp_path, tiny_overrides):
-    difference = _train(tmp_path / "difference", tiny_overrides + ["policy.feature_norm=difference"])
-    assert _without_timing(_train(tmp_path / "default", tiny_overrides)) != _without_timing(difference)
+    difference = _train(
+        tmp_path / "difference", tiny_overrides + ["policy.feature_norm=difference"]
+    )
+    assert _without_timing(_train(tmp_path / "default", tiny_overrides)) != _without_timing(
+        difference
+    )
 
 
 def test_eye_position_feature_reaches_the_policy(tmp_path, tiny_overrides, monkeypatch):
@@ -316,8 +400,14 @@ def test_eye_position_feature_reaches_the_policy(tmp_path, tiny_overrides, monke
     from parallax.policy import NaturalActorCritic
 
     # (the reward-change entry, on by default, would come after ν: off here)
-    cfg = compose(tiny_overrides + ["policy.eye_position_reference_m=0.5", "env.initial_pan_jitter_deg=1",
-                                    "policy.reward_change_gain=0"])
+    cfg = compose(
+        tiny_overrides
+        + [
+            "policy.eye_position_reference_m=0.5",
+            "env.initial_pan_jitter_deg=1",
+            "policy.reward_change_gain=0",
+        ]
+    )
     trainer = Trainer(cfg, tmp_path)
     physics = trainer.exp.envs[0].physics
     seen, expected = [], []
@@ -337,11 +427,16 @@ def test_eye_position_feature_reaches_the_policy(tmp_path, tiny_overrides, monke
     assert len(seen) == pres.steps - 1 and len(set(seen)) > 2
     assert seen == pytest.approx(expected, rel=1e-6, abs=1e-9)
     monkeypatch.undo()
-    _train(tmp_path / "run", tiny_overrides + ["policy.eye_position_reference_m=0.5", "policy.reward_change_gain=0"])
+    _train(
+        tmp_path / "run",
+        tiny_overrides + ["policy.eye_position_reference_m=0.5", "policy.reward_change_gain=0"],
+    )
     from parallax import checkpoint
 
     actor = checkpoint.load(tmp_path / "run" / "checkpoint.pt")["experiment"]["policy"]["actor"]
-    assert actor.shape[1] == 32 * 2 + 1 and bool(actor[:, -1].abs().sum() > 0)  # ν's weight was learnt
+    assert actor.shape[1] == 32 * 2 + 1 and bool(
+        actor[:, -1].abs().sum() > 0
+    )  # ν's weight was learnt
 
 
 def test_reward_change_feature_reaches_the_policy(tmp_path, tiny_overrides, monkeypatch):
@@ -378,7 +473,7 @@ def test_reward_change_feature_reaches_the_policy(tmp_path, tiny_overrides, monk
     assert all(g == 0.0 for g in seen[::t_h])
     # within a trial: g = clip(10·Δr/|r_prev|·sign(Δpan)). Each trial makes t_h − 1 updates, the
     # k-th with the reward of its iteration k + 1 (the step into a trial's first image is not learnt)
-    trial_rewards = [rewards[i * (t_h - 1):(i + 1) * (t_h - 1)] for i in range(len(seen) // t_h)]
+    trial_rewards = [rewards[i * (t_h - 1) : (i + 1) * (t_h - 1)] for i in range(len(seen) // t_h)]
     for i, rs in enumerate(trial_rewards):
         for k in range(1, len(rs)):
             step = pans[i * t_h + k + 1] - pans[i * t_h + k]

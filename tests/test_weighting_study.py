@@ -6,9 +6,17 @@ import numpy as np
 import pytest
 
 from parallax.distance.synthetic import PAPER_DISTANCES_M, PAPER_LATERAL_POSITIONS_M, parallax_pans
-from parallax.distance.weighting_study import (NOISE_PATTERNS, NO_WEIGHTING, StudySettings, main, markdown,
-                                               noisy_pans, run_study, summarise)
 from parallax.distance.weighting import sensitive_positions
+from parallax.distance.weighting_study import (
+    NO_WEIGHTING,
+    NOISE_PATTERNS,
+    StudySettings,
+    main,
+    markdown,
+    noisy_pans,
+    run_study,
+    summarise,
+)
 
 SENSITIVE = np.array(sensitive_positions(PAPER_LATERAL_POSITIONS_M))
 
@@ -20,7 +28,14 @@ def _noise(name: str, n: int = 4000) -> np.ndarray:
 
 
 def test_the_sensitive_positions_are_15_to_20_cm():
-    assert [round(l * 100) for l, s in zip(PAPER_LATERAL_POSITIONS_M, SENSITIVE) if s] == [15, 16, 17, 18, 19, 20]
+    assert [round(l * 100) for l, s in zip(PAPER_LATERAL_POSITIONS_M, SENSITIVE) if s] == [
+        15,
+        16,
+        17,
+        18,
+        19,
+        20,
+    ]
 
 
 def test_noise_patterns_put_their_noise_where_they_say():
@@ -29,9 +44,13 @@ def test_noise_patterns_put_their_noise_where_they_say():
     louder = _noise("sensitive_x3").std(axis=0)
     np.testing.assert_allclose(louder[SENSITIVE], 0.15, rtol=0.08)
     np.testing.assert_allclose(louder[~SENSITIVE], 0.05, rtol=0.08)
-    tail = np.abs(_noise("sensitive_tail")) > 0.4  # 8 sd of the base noise: only the tail gets there
+    tail = (
+        np.abs(_noise("sensitive_tail")) > 0.4
+    )  # 8 sd of the base noise: only the tail gets there
     assert not tail[:, ~SENSITIVE].any()
-    assert 0.05 < tail[:, SENSITIVE].mean() < 0.1  # 10 % of the pans, |N(0, 1°)| > 0.4° for 69 % of them
+    assert (
+        0.05 < tail[:, SENSITIVE].mean() < 0.1
+    )  # 10 % of the pans, |N(0, 1°)| > 0.4° for 69 % of them
 
 
 def test_weighting_down_the_runaway_positions_helps_an_unregularised_learner():
@@ -51,17 +70,22 @@ def test_same_seed_same_numbers():
     settings = StudySettings(stream=20, queue=20, weight_decay=0.0, test_repeats=1)
     first = run_study(["uniform"], [1.0], [3, 4], settings)
     assert first == run_study(["uniform"], [1.0], [3, 4], settings)
-    assert first == run_study(["uniform"], [1.0], [3, 4], settings, jobs=2)  # worker processes, same rows
+    assert first == run_study(
+        ["uniform"], [1.0], [3, 4], settings, jobs=2
+    )  # worker processes, same rows
     assert len(first) == 4 and all(np.isfinite(row["error_pct"]) for row in first)
 
 
-@pytest.mark.parametrize("args, named", [
-    (["--patterns", "gaussian"], "'gaussian'"),
-    (["--y", "0"], "0.0"),
-    (["--stream", "50", "--queue", "100"], "(50)"),
-    (["--seeds", "0"], "0"),
-    (["--weight-decay", "nan"], "nan"),
-])
+@pytest.mark.parametrize(
+    "args, named",
+    [
+        (["--patterns", "gaussian"], "'gaussian'"),
+        (["--y", "0"], "0.0"),
+        (["--stream", "50", "--queue", "100"], "(50)"),
+        (["--seeds", "0"], "0"),
+        (["--weight-decay", "nan"], "nan"),
+    ],
+)
 def test_bad_settings_are_refused_with_the_value(args, named, capsys):
     assert main(args) == 2
     error = capsys.readouterr().err.strip()
@@ -70,8 +94,25 @@ def test_bad_settings_are_refused_with_the_value(args, named, capsys):
 
 def test_the_command_prints_the_table_and_writes_the_json(tmp_path, capsys):
     out = tmp_path / "study.json"
-    assert main(["--patterns", "uniform", "--y", "1", "--seeds", "2", "--stream", "20", "--queue", "20",
-                 "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "--patterns",
+                "uniform",
+                "--y",
+                "1",
+                "--seeds",
+                "2",
+                "--stream",
+                "20",
+                "--queue",
+                "20",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert "| uniform | y=1 |" in capsys.readouterr().out
     payload = json.loads(out.read_text())
     assert payload["settings"]["queue"] == 20 and len(payload["rows"]) == 4

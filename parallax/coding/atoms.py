@@ -20,18 +20,28 @@ _GREY = 128
 _BACKGROUND = 0
 
 
-def atom_grid(dictionary: torch.Tensor | np.ndarray, patch: int = 10, columns: int | None = None,
-              zoom: int = 3, gap: int = 2) -> np.ndarray:
+def atom_grid(
+    dictionary: torch.Tensor | np.ndarray,
+    patch: int = 10,
+    columns: int | None = None,
+    zoom: int = 3,
+    gap: int = 2,
+) -> np.ndarray:
     """uint8 (H, W) grid of (I0-half | I(t)-half) atom pairs of an (N, 2·patch²) dictionary.
 
     ``columns`` pairs per row (default ≈ √N), each pixel drawn ``zoom``×``zoom``, ``gap`` black
     pixels between pairs.
     """
-    atoms = dictionary.detach().cpu().double().numpy() if isinstance(dictionary, torch.Tensor) \
+    atoms = (
+        dictionary.detach().cpu().double().numpy()
+        if isinstance(dictionary, torch.Tensor)
         else np.asarray(dictionary, dtype=np.float64)
+    )
     if atoms.ndim != 2 or atoms.shape[1] != 2 * patch * patch:
-        raise ValueError(f"dictionary must be (N, {2 * patch * patch}) for patch {patch}, "
-                         f"got shape {atoms.shape}")
+        raise ValueError(
+            f"dictionary must be (N, {2 * patch * patch}) for patch {patch}, "
+            f"got shape {atoms.shape}"
+        )
     if zoom < 1 or gap < 0:
         raise ValueError(f"zoom must be ≥ 1 and gap ≥ 0, got zoom={zoom}, gap={gap}")
     count = atoms.shape[0]
@@ -49,9 +59,9 @@ def atom_grid(dictionary: torch.Tensor | np.ndarray, patch: int = 10, columns: i
     for index in range(count):
         top = gap + (index // columns) * cell_h
         left = gap + (index % columns) * cell_w
-        grid[top:top + patch, left:left + patch] = halves[index, 0]
-        grid[top:top + patch, left + patch:left + patch + 1] = _GREY
-        grid[top:top + patch, left + patch + 1:left + pair_width] = halves[index, 1]
+        grid[top : top + patch, left : left + patch] = halves[index, 0]
+        grid[top : top + patch, left + patch : left + patch + 1] = _GREY
+        grid[top : top + patch, left + patch + 1 : left + pair_width] = halves[index, 1]
     return np.kron(grid, np.ones((zoom, zoom), dtype=np.uint8)) if zoom > 1 else grid
 
 

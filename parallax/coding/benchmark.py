@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import sys
-from typing import Callable
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -25,8 +25,10 @@ from parallax.timing import interleaved_medians_ms
 from . import native
 from .coder import MultiScaleCoder
 
-SCALE_SPECS = {"coarse": {"window": 250, "subsample": 8, "patch": 10, "stride": 1},
-               "fine": {"window": 150, "subsample": 2, "patch": 10, "stride": 4}}
+SCALE_SPECS = {
+    "coarse": {"window": 250, "subsample": 8, "patch": 10, "stride": 1},
+    "fine": {"window": 150, "subsample": 2, "patch": 10, "stride": 4},
+}
 IMAGE_SIZE = 256
 WARM_UP = 5
 
@@ -36,17 +38,34 @@ def _frames(batch: int, shift: int = 4) -> tuple[np.ndarray, np.ndarray]:
     import skimage.data
 
     photo = cv2.resize(skimage.data.astronaut(), (IMAGE_SIZE + 16 * batch, IMAGE_SIZE + 16 * batch))
-    references = np.stack([photo[8 * i:8 * i + IMAGE_SIZE, 8 * i + 16:8 * i + 16 + IMAGE_SIZE]
-                           for i in range(batch)])
-    currents = np.stack([photo[8 * i:8 * i + IMAGE_SIZE, 8 * i + 16 - shift:8 * i + 16 - shift + IMAGE_SIZE]
-                         for i in range(batch)])
+    references = np.stack(
+        [
+            photo[8 * i : 8 * i + IMAGE_SIZE, 8 * i + 16 : 8 * i + 16 + IMAGE_SIZE]
+            for i in range(batch)
+        ]
+    )
+    currents = np.stack(
+        [
+            photo[8 * i : 8 * i + IMAGE_SIZE, 8 * i + 16 - shift : 8 * i + 16 - shift + IMAGE_SIZE]
+            for i in range(batch)
+        ]
+    )
     return references, currents
 
 
 def _coder(pursuit: str, learn: bool, scales: list[str]) -> MultiScaleCoder:
-    return MultiScaleCoder(scales, SCALE_SPECS, atoms=288, sparsity=10, learning_rate=0.2,
-                           normalisation="per_half", learn=learn, seed=0, image_size=IMAGE_SIZE,
-                           pursuit=pursuit)
+    return MultiScaleCoder(
+        scales,
+        SCALE_SPECS,
+        atoms=288,
+        sparsity=10,
+        learning_rate=0.2,
+        normalisation="per_half",
+        learn=learn,
+        seed=0,
+        image_size=IMAGE_SIZE,
+        pursuit=pursuit,
+    )
 
 
 def _gram_variants() -> tuple[str, ...]:
@@ -65,16 +84,19 @@ def _operations() -> dict[str, Callable[[], object]]:
                 coder.set_reference(references)
                 mode = "encode_update" if learn else "encode_frozen"
                 operations[f"{mode}_both_B{batch}_{pursuit}_ms"] = (
-                    lambda coder=coder, currents=currents: coder(currents))
+                    lambda coder=coder, currents=currents: coder(currents)
+                )
         for scale in ("coarse", "fine"):
             for pursuit in grams:
                 coder = _coder(pursuit, True, [scale])
                 coder.set_reference(references)
                 operations[f"encode_update_{scale}_B{batch}_{pursuit}_ms"] = (
-                    lambda coder=coder, currents=currents: coder(currents))
+                    lambda coder=coder, currents=currents: coder(currents)
+                )
         reference_coder = _coder("gram", True, ["coarse", "fine"])
         operations[f"set_reference_both_B{batch}_ms"] = (
-            lambda coder=reference_coder, references=references: coder.set_reference(references))
+            lambda coder=reference_coder, references=references: coder.set_reference(references)
+        )
     return operations
 
 
@@ -86,7 +108,7 @@ def run(repeats: int = 50) -> dict[str, float]:
     results: dict[str, float] = {}
     default_threads = torch.get_num_threads()
     grams = _gram_variants()
-    default = grams[0]   # what pursuit="gram" runs: the kernel when it builds
+    default = grams[0]  # what pursuit="gram" runs: the kernel when it builds
     for threads, suffix in ((default_threads, ""), (1, "_1thread")):
         torch.set_num_threads(threads)
         try:
@@ -95,14 +117,20 @@ def run(repeats: int = 50) -> dict[str, float]:
             torch.set_num_threads(default_threads)
         for batch in (1, 16):
             for mode in ("encode_update", "encode_frozen"):
-                gram = timings[f"{mode}_both_B{batch}_gram_ms"] = timings[f"{mode}_both_B{batch}_{default}_ms"]
+                gram = timings[f"{mode}_both_B{batch}_gram_ms"] = timings[
+                    f"{mode}_both_B{batch}_{default}_ms"
+                ]
                 recompute = timings[f"{mode}_both_B{batch}_recompute_ms"]
                 timings[f"{mode}_both_B{batch}_speedup"] = recompute / gram
                 if "gram_cpp" in grams:
                     timings[f"{mode}_both_B{batch}_cpp_speedup"] = (
-                        timings[f"{mode}_both_B{batch}_gram_torch_ms"] / timings[f"{mode}_both_B{batch}_gram_cpp_ms"])
+                        timings[f"{mode}_both_B{batch}_gram_torch_ms"]
+                        / timings[f"{mode}_both_B{batch}_gram_cpp_ms"]
+                    )
             for scale in ("coarse", "fine"):
-                timings[f"encode_update_{scale}_B{batch}_gram_ms"] = timings[f"encode_update_{scale}_B{batch}_{default}_ms"]
+                timings[f"encode_update_{scale}_B{batch}_gram_ms"] = timings[
+                    f"encode_update_{scale}_B{batch}_{default}_ms"
+                ]
         results.update({name + suffix: value for name, value in sorted(timings.items())})
         results[f"torch_threads{suffix}"] = float(threads)
     results["repeats"] = float(repeats)

@@ -15,9 +15,10 @@ from __future__ import annotations
 import math
 import os
 import zlib
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -33,17 +34,20 @@ from .scale import ScaleCoder
 class CoderOutput:
     """Per-call result for B images, all float32 on the coder's device."""
 
-    state: torch.Tensor                  # (B, atoms·len(scales)) θ, scales in configured order
-    reward: torch.Tensor                 # (B,) −Σ_j e^j
-    errors: dict[str, torch.Tensor]      # scale → (B,) e^j
+    state: torch.Tensor  # (B, atoms·len(scales)) θ, scales in configured order
+    reward: torch.Tensor  # (B,) −Σ_j e^j
+    errors: dict[str, torch.Tensor]  # scale → (B,) e^j
 
     @staticmethod
-    def join(outputs: Sequence["CoderOutput"]) -> "CoderOutput":
+    def join(outputs: Sequence[CoderOutput]) -> CoderOutput:
         """The outputs of consecutive chunks of robots as one output for all of them."""
-        return CoderOutput(state=torch.cat([o.state for o in outputs]),
-                           reward=torch.cat([o.reward for o in outputs]),
-                           errors={scale: torch.cat([o.errors[scale] for o in outputs])
-                                   for scale in outputs[0].errors})
+        return CoderOutput(
+            state=torch.cat([o.state for o in outputs]),
+            reward=torch.cat([o.reward for o in outputs]),
+            errors={
+                scale: torch.cat([o.errors[scale] for o in outputs]) for scale in outputs[0].errors
+            },
+        )
 
 
 @dataclass
@@ -63,7 +67,10 @@ def _scale_helper() -> ThreadPoolExecutor:
     """The thread that encodes the second scale (one per process, started on first use)."""
     global _helper, _helper_pid
     if _helper is None or _helper_pid != os.getpid():
-        _helper, _helper_pid = ThreadPoolExecutor(1, thread_name_prefix="parallax-scale"), os.getpid()
+        _helper, _helper_pid = (
+            ThreadPoolExecutor(1, thread_name_prefix="parallax-scale"),
+            os.getpid(),
+        )
     return _helper
 
 
@@ -91,7 +98,11 @@ def scale_seed(seed: int, scale: str) -> int:
 def _image_sides(image_size: Any) -> tuple[int, int]:
     if isinstance(image_size, (int, np.integer)) and not isinstance(image_size, bool):
         sides = (int(image_size), int(image_size))
-    elif isinstance(image_size, Sequence) and len(image_size) == 2 and not isinstance(image_size, str):
+    elif (
+        isinstance(image_size, Sequence)
+        and len(image_size) == 2
+        and not isinstance(image_size, str)
+    ):
         sides = (int(image_size[0]), int(image_size[1]))
     else:
         raise ValueError(f"image_size must be an int or (height, width), got {image_size!r}")
@@ -109,10 +120,19 @@ def _positive_int(name: str, value: Any) -> int:
 class MultiScaleCoder(nn.Module):
     """Sparse coders of several scales on the same images; see the module docstring."""
 
-    def __init__(self, scales: Sequence[str], scale_specs: Mapping[str, Mapping[str, Any]],
-                 atoms: int = 288, sparsity: int = 10, learning_rate: float = 0.2,
-                 normalisation: str = "per_half", learn: bool = True, seed: int = 0,
-                 image_size: int | Sequence[int] = 256, pursuit: str = "gram") -> None:
+    def __init__(
+        self,
+        scales: Sequence[str],
+        scale_specs: Mapping[str, Mapping[str, Any]],
+        atoms: int = 288,
+        sparsity: int = 10,
+        learning_rate: float = 0.2,
+        normalisation: str = "per_half",
+        learn: bool = True,
+        seed: int = 0,
+        image_size: int | Sequence[int] = 256,
+        pursuit: str = "gram",
+    ) -> None:
         super().__init__()
         if isinstance(scales, str) or not isinstance(scales, Sequence) or len(scales) == 0:
             raise ValueError(f"scales must be a non-empty list of scale names, got {scales!r}")
@@ -136,11 +156,14 @@ class MultiScaleCoder(nn.Module):
         for name in scales:
             spec = ScaleSpec.from_mapping(name, scale_specs[name])
             if spec.window > min(height, width):
-                raise ValueError(f"scale_specs.{name}.window={spec.window} does not fit in "
-                                 f"image_size={image_size!r}")
+                raise ValueError(
+                    f"scale_specs.{name}.window={spec.window} does not fit in "
+                    f"image_size={image_size!r}"
+                )
             generator = torch.Generator().manual_seed(scale_seed(int(seed), name))
-            coders[name] = ScaleCoder(spec, atoms, sparsity, learning_rate, normalisation,
-                                      generator, pursuit)
+            coders[name] = ScaleCoder(
+                spec, atoms, sparsity, learning_rate, normalisation, generator, pursuit
+            )
         self.scales = scales
         #: Encode the scales on two threads at once (CPU; results are the same).
         self.parallel_scales = True
@@ -181,8 +204,10 @@ class MultiScaleCoder(nn.Module):
         errors = {name: output.error for name, (output, _) in encoded.items()}
         state = torch.cat([encoded[name][0].activity for name in self.scales], dim=1)
         reward = -torch.stack(list(errors.values())).sum(dim=0)
-        return Encoding(output=CoderOutput(state=state, reward=reward, errors=errors),
-                        codes={name: code for name, (_, code) in encoded.items()})
+        return Encoding(
+            output=CoderOutput(state=state, reward=reward, errors=errors),
+            codes={name: code for name, (_, code) in encoded.items()},
+        )
 
     @torch.no_grad()
     def learn_from(self, encodings: Encoding | Sequence[Encoding]) -> None:

@@ -12,7 +12,7 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -25,11 +25,14 @@ from .pursuit import SparseCode, dense_codes
 _MIN_ATOM_NORM = 1e-12
 
 
-def random_dictionary(n_atoms: int, dim: int, generator: torch.Generator,
-                      dtype: torch.dtype = torch.float32) -> torch.Tensor:
+def random_dictionary(
+    n_atoms: int, dim: int, generator: torch.Generator, dtype: torch.dtype = torch.float32
+) -> torch.Tensor:
     """(n_atoms, dim) Gaussian atoms normalised to unit length; reproducible from ``generator``."""
     if n_atoms < 1 or dim < 1:
-        raise ValueError(f"a dictionary needs at least one atom of one element, got {n_atoms}×{dim}")
+        raise ValueError(
+            f"a dictionary needs at least one atom of one element, got {n_atoms}×{dim}"
+        )
     atoms = torch.randn(n_atoms, dim, generator=generator, dtype=torch.float64)
     return normalise_atoms_(atoms).to(dtype)
 
@@ -40,8 +43,9 @@ def normalise_atoms_(dictionary: torch.Tensor) -> torch.Tensor:
     return dictionary.div_(norms)
 
 
-def codes_times_residuals(code: SparseCode | Sequence[SparseCode], n_atoms: int,
-                          kernel: str | None = None) -> torch.Tensor:
+def codes_times_residuals(
+    code: SparseCode | Sequence[SparseCode], n_atoms: int, kernel: str | None = None
+) -> torch.Tensor:
     """Bᵀ·R, (N, K): for every atom, the coefficient-weighted sum of the residuals of the patches
     that picked it. Grouping the M·k picks by atom costs M·k·K instead of the dense N·M·K.
 
@@ -56,9 +60,13 @@ def codes_times_residuals(code: SparseCode | Sequence[SparseCode], n_atoms: int,
     if compiled is not None:
         product = None
         for chunk in chunks:
-            product = compiled.codes_times_residuals(chunk.atom_indices.contiguous(),
-                                                     chunk.coefficients.contiguous(),
-                                                     chunk.residuals.contiguous(), n_atoms, product)
+            product = compiled.codes_times_residuals(
+                chunk.atom_indices.contiguous(),
+                chunk.coefficients.contiguous(),
+                chunk.residuals.contiguous(),
+                n_atoms,
+                product,
+            )
         return product
     atom_indices = torch.cat([chunk.atom_indices for chunk in chunks])
     coefficients = torch.cat([chunk.coefficients for chunk in chunks])
@@ -69,8 +77,13 @@ def codes_times_residuals(code: SparseCode | Sequence[SparseCode], n_atoms: int,
     offsets = torch.zeros_like(counts)
     offsets[1:] = torch.cumsum(counts, 0)[:-1]
     patch_of_pick = torch.div(order, atom_indices.shape[1], rounding_mode="floor")
-    return F.embedding_bag(patch_of_pick, residuals, offsets=offsets, mode="sum",
-                           per_sample_weights=coefficients.reshape(-1)[order])
+    return F.embedding_bag(
+        patch_of_pick,
+        residuals,
+        offsets=offsets,
+        mode="sum",
+        per_sample_weights=coefficients.reshape(-1)[order],
+    )
 
 
 def _stable_order(picks: torch.Tensor, n_atoms: int) -> torch.Tensor:
@@ -82,16 +95,21 @@ def _stable_order(picks: torch.Tensor, n_atoms: int) -> torch.Tensor:
 
 
 @torch.no_grad()
-def gradient_step_(dictionary: torch.Tensor, code: SparseCode | Sequence[SparseCode],
-                   learning_rate: float, kernel: str | None = None) -> None:
+def gradient_step_(
+    dictionary: torch.Tensor,
+    code: SparseCode | Sequence[SparseCode],
+    learning_rate: float,
+    kernel: str | None = None,
+) -> None:
     """One step of gradient descent on ½‖γ − Φᵀb‖² averaged over the P coded patches, in place
     (``code``: one code, or the codes of consecutive chunks of the patches)."""
     chunks = [code] if isinstance(code, SparseCode) else list(code)
     patches = sum(chunk.residuals.shape[0] for chunk in chunks)
     if patches == 0:
         return
-    dictionary.add_(codes_times_residuals(chunks, dictionary.shape[0], kernel),
-                    alpha=learning_rate / patches)
+    dictionary.add_(
+        codes_times_residuals(chunks, dictionary.shape[0], kernel), alpha=learning_rate / patches
+    )
     normalise_atoms_(dictionary)
 
 
@@ -103,8 +121,9 @@ def pooled_activity(codes: torch.Tensor) -> torch.Tensor:
 _EXACT_POOLED_ACTIVITY: dict[tuple, bool] = {}
 
 
-def exact_pooled_activity_kernel(patches: int, n_atoms: int, sparsity: int, dtype: torch.dtype,
-                                 kernel: str | None = None) -> bool:
+def exact_pooled_activity_kernel(
+    patches: int, n_atoms: int, sparsity: int, dtype: torch.dtype, kernel: str | None = None
+) -> bool:
     """Whether the compiled θ kernel (chosen by ``kernel``, see :mod:`parallax.coding.native`)
     gives :func:`pooled_activity`'s θ bit for bit for images of ``patches`` patches and
     ``n_atoms`` atoms. It replays torch's summation order, which depends on the shape (torch
@@ -121,7 +140,8 @@ def exact_pooled_activity_kernel(patches: int, n_atoms: int, sparsity: int, dtyp
         coefficients = torch.randn(2 * patches, sparsity, generator=generator, dtype=dtype)
         dense = dense_codes(picks, coefficients, n_atoms).reshape(2, patches, n_atoms)
         _EXACT_POOLED_ACTIVITY[key] = torch.equal(
-            compiled.pooled_activity(picks, coefficients, patches, n_atoms), pooled_activity(dense))
+            compiled.pooled_activity(picks, coefficients, patches, n_atoms), pooled_activity(dense)
+        )
     return _EXACT_POOLED_ACTIVITY[key]
 
 
@@ -132,8 +152,9 @@ def pooled_activity_of(code: SparseCode, images: int, n_atoms: int) -> torch.Ten
     if code.codes is not None:
         return pooled_activity(code.codes.reshape(images, -1, n_atoms))
     compiled = native.kernels_for("cpp", code.coefficients)
-    return compiled.pooled_activity(code.atom_indices, code.coefficients,
-                                    code.atom_indices.shape[0] // images, n_atoms)
+    return compiled.pooled_activity(
+        code.atom_indices, code.coefficients, code.atom_indices.shape[0] // images, n_atoms
+    )
 
 
 def reconstruction_error(patches: torch.Tensor, residuals: torch.Tensor) -> torch.Tensor:

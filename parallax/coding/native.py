@@ -23,9 +23,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
-from typing import Iterator
 
 import torch
 
@@ -69,8 +69,13 @@ def _build() -> ModuleType:
         # torch's own lock file outlives a build that was killed, and then every later build
         # waits for it forever; while we hold our lock no other build of ours can be running.
         (build_directory / "lock").unlink(missing_ok=True)
-        return cpp_extension.load(name=name, sources=[str(SOURCE)], extra_cflags=flags,
-                                  build_directory=str(build_directory), verbose=False)
+        return cpp_extension.load(
+            name=name,
+            sources=[str(SOURCE)],
+            extra_cflags=flags,
+            build_directory=str(build_directory),
+            verbose=False,
+        )
 
 
 def _build_directory(cpp_extension: ModuleType, name: str) -> Path:
@@ -107,7 +112,7 @@ def _self_check(module: ModuleType) -> None:
 
     generator = torch.Generator().manual_seed(0)
     for dtype in (torch.float32, torch.float64):
-        for atoms in (40, 37, 75):   # whole vector lanes only, and a tail after them (short, long)
+        for atoms in (40, 37, 75):  # whole vector lanes only, and a tail after them (short, long)
             dictionary = torch.randn(atoms, 12, generator=generator, dtype=dtype)
             dictionary /= dictionary.norm(dim=1, keepdim=True)
             patches = torch.randn(64, 12, generator=generator, dtype=dtype)
@@ -117,17 +122,25 @@ def _self_check(module: ModuleType) -> None:
             got = module.gram_pursuit(correlations.clone(), gram, 8)
             code = _finish(patches, dictionary, *expected)
             codes, residuals = module.codes_and_residuals(patches, dictionary, *expected)
-            product = module.codes_times_residuals(code.atom_indices, code.coefficients,
-                                                   code.residuals, atoms)
+            product = module.codes_times_residuals(
+                code.atom_indices, code.coefficients, code.residuals, atoms
+            )
             for name, mine, theirs in (
-                    ("picks", got[0], expected[0]), ("coefficients", got[1], expected[1]),
-                    ("codes", codes, code.codes), ("residuals", residuals, code.residuals),
-                    ("residuals alone", module.residuals_only(patches, dictionary, *expected),
-                     code.residuals),
-                    ("B^T R", product, codes_times_residuals(code, atoms, kernel="torch"))):
+                ("picks", got[0], expected[0]),
+                ("coefficients", got[1], expected[1]),
+                ("codes", codes, code.codes),
+                ("residuals", residuals, code.residuals),
+                (
+                    "residuals alone",
+                    module.residuals_only(patches, dictionary, *expected),
+                    code.residuals,
+                ),
+                ("B^T R", product, codes_times_residuals(code, atoms, kernel="torch")),
+            ):
                 if not torch.equal(mine, theirs):
-                    raise RuntimeError(f"its {dtype} {name} differ from the numpy/torch code's "
-                                       f"on this machine")
+                    raise RuntimeError(
+                        f"its {dtype} {name} differ from the numpy/torch code's on this machine"
+                    )
 
 
 def load_kernels() -> ModuleType | None:
@@ -142,8 +155,10 @@ def load_kernels() -> ModuleType | None:
         except Exception as error:  # noqa: BLE001 — any failure means: use the fallback
             lines = str(error).strip().splitlines()
             _failure = f"{type(error).__name__}: {lines[0] if lines else ''}"
-            log.warning("compiled matching-pursuit kernels unavailable (%s); using the numpy/torch "
-                        "code", _failure)
+            log.warning(
+                "compiled matching-pursuit kernels unavailable (%s); using the numpy/torch code",
+                _failure,
+            )
     return _module
 
 

@@ -39,12 +39,12 @@ from . import native
 class SparseCode:
     """The outcome of one pursuit over M patches with ``sparsity`` steps."""
 
-    atom_indices: torch.Tensor   # (M, sparsity) int64: atom picked at each step
-    coefficients: torch.Tensor   # (M, sparsity): correlation added at each step
+    atom_indices: torch.Tensor  # (M, sparsity) int64: atom picked at each step
+    coefficients: torch.Tensor  # (M, sparsity): correlation added at each step
     # (M, N): b_{i,n}, repeated picks of one atom summed; None when the pursuit was asked not to
     # make them (the compiled kernels compute θ from the picks, see dictionary.pooled_activity_of)
     codes: torch.Tensor | None
-    residuals: torch.Tensor      # (M, K): γ − Σ_n b_n·φ_n after the last step
+    residuals: torch.Tensor  # (M, K): γ − Σ_n b_n·φ_n after the last step
 
 
 def gram_matrix(dictionary: torch.Tensor) -> torch.Tensor:
@@ -52,7 +52,9 @@ def gram_matrix(dictionary: torch.Tensor) -> torch.Tensor:
     return dictionary @ dictionary.T
 
 
-def dense_codes(atom_indices: torch.Tensor, coefficients: torch.Tensor, n_atoms: int) -> torch.Tensor:
+def dense_codes(
+    atom_indices: torch.Tensor, coefficients: torch.Tensor, n_atoms: int
+) -> torch.Tensor:
     """(M, N) coefficients b_{i,n} from the per-step picks; repeated picks accumulate."""
     codes = coefficients.new_zeros(coefficients.shape[0], n_atoms)
     return codes.scatter_add_(1, atom_indices, coefficients)
@@ -60,23 +62,33 @@ def dense_codes(atom_indices: torch.Tensor, coefficients: torch.Tensor, n_atoms:
 
 def _check_inputs(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: int) -> None:
     if patches.dim() != 2 or dictionary.dim() != 2 or patches.shape[1] != dictionary.shape[1]:
-        raise ValueError(f"patches (M,K) and dictionary (N,K) disagree: {tuple(patches.shape)} "
-                         f"vs {tuple(dictionary.shape)}")
+        raise ValueError(
+            f"patches (M,K) and dictionary (N,K) disagree: {tuple(patches.shape)} "
+            f"vs {tuple(dictionary.shape)}"
+        )
     if patches.dtype != dictionary.dtype or patches.device != dictionary.device:
-        raise ValueError(f"patches ({patches.dtype}, {patches.device}) and dictionary "
-                         f"({dictionary.dtype}, {dictionary.device}) must share dtype and device")
+        raise ValueError(
+            f"patches ({patches.dtype}, {patches.device}) and dictionary "
+            f"({dictionary.dtype}, {dictionary.device}) must share dtype and device"
+        )
     if isinstance(sparsity, bool) or not isinstance(sparsity, int) or sparsity < 1:
         raise ValueError(f"sparsity must be a positive integer, got {sparsity!r}")
 
 
-def reconstruct(dictionary: torch.Tensor, atom_indices: torch.Tensor,
-                coefficients: torch.Tensor) -> torch.Tensor:
+def reconstruct(
+    dictionary: torch.Tensor, atom_indices: torch.Tensor, coefficients: torch.Tensor
+) -> torch.Tensor:
     """Σ_s c_s·φ_{k_s} per patch, (M, K), from the picks alone: M·k·K work instead of M·N·K."""
     return F.embedding_bag(atom_indices, dictionary, per_sample_weights=coefficients, mode="sum")
 
 
-def _finish(patches: torch.Tensor, dictionary: torch.Tensor, atom_indices: torch.Tensor,
-            coefficients: torch.Tensor, residuals: torch.Tensor | None = None) -> SparseCode:
+def _finish(
+    patches: torch.Tensor,
+    dictionary: torch.Tensor,
+    atom_indices: torch.Tensor,
+    coefficients: torch.Tensor,
+    residuals: torch.Tensor | None = None,
+) -> SparseCode:
     codes = dense_codes(atom_indices, coefficients, dictionary.shape[0])
     if residuals is None:
         residuals = patches - reconstruct(dictionary, atom_indices, coefficients)
@@ -84,9 +96,14 @@ def _finish(patches: torch.Tensor, dictionary: torch.Tensor, atom_indices: torch
 
 
 @torch.no_grad()
-def matching_pursuit(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: int,
-                     gram: torch.Tensor | None = None, kernel: str | None = None,
-                     dense_codes: bool = True) -> SparseCode:
+def matching_pursuit(
+    patches: torch.Tensor,
+    dictionary: torch.Tensor,
+    sparsity: int,
+    gram: torch.Tensor | None = None,
+    kernel: str | None = None,
+    dense_codes: bool = True,
+) -> SparseCode:
     """Batched plain MP in Gram form. ``gram`` may be passed when it is cached (Φ unchanged).
 
     With ``dense_codes=False`` the compiled kernels skip the (M, N) codes (``codes`` is None):
@@ -100,16 +117,20 @@ def matching_pursuit(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: 
     _check_inputs(patches, dictionary, sparsity)
     if gram is None:
         gram = gram_matrix(dictionary)
-    correlations = patches @ dictionary.T                      # (M, N), updated in place
+    correlations = patches @ dictionary.T  # (M, N), updated in place
     compiled = native.kernels_for(kernel, correlations)
     if compiled is not None:
-        atom_indices, coefficients = compiled.gram_pursuit(correlations, gram.contiguous(), sparsity)
+        atom_indices, coefficients = compiled.gram_pursuit(
+            correlations, gram.contiguous(), sparsity
+        )
         if not dense_codes:
-            residuals = compiled.residuals_only(patches.contiguous(), dictionary.contiguous(),
-                                                atom_indices, coefficients)
+            residuals = compiled.residuals_only(
+                patches.contiguous(), dictionary.contiguous(), atom_indices, coefficients
+            )
             return SparseCode(atom_indices, coefficients, None, residuals)
-        codes, residuals = compiled.codes_and_residuals(patches.contiguous(), dictionary.contiguous(),
-                                                        atom_indices, coefficients)
+        codes, residuals = compiled.codes_and_residuals(
+            patches.contiguous(), dictionary.contiguous(), atom_indices, coefficients
+        )
         return SparseCode(atom_indices, coefficients, codes, residuals)
     steps = _gram_steps_cpu if correlations.device.type == "cpu" else _gram_steps
     atom_indices, coefficients = steps(correlations, gram, sparsity)
@@ -123,8 +144,9 @@ def _abs_argmax(values: torch.Tensor) -> torch.Tensor:
     return values.abs().argmax(dim=1)
 
 
-def _gram_steps(correlations: torch.Tensor, gram: torch.Tensor,
-                sparsity: int) -> tuple[torch.Tensor, torch.Tensor]:
+def _gram_steps(
+    correlations: torch.Tensor, gram: torch.Tensor, sparsity: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """The pursuit steps in torch, for any device: (M, sparsity) picks and coefficients."""
     # One M×N buffer reused by every step: fresh allocations cost as much as the arithmetic here.
     gram_rows = torch.empty_like(correlations)
@@ -140,8 +162,9 @@ def _gram_steps(correlations: torch.Tensor, gram: torch.Tensor,
     return torch.stack(picks, dim=1), torch.stack(coefficients, dim=1)
 
 
-def _gram_steps_cpu(correlations: torch.Tensor, gram: torch.Tensor,
-                    sparsity: int) -> tuple[torch.Tensor, torch.Tensor]:
+def _gram_steps_cpu(
+    correlations: torch.Tensor, gram: torch.Tensor, sparsity: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """The same steps on the CPU, with the row-wise |argmax| and the pick bookkeeping in numpy on
     zero-copy views: torch's CPU row argmax is ~5× slower than numpy's at 529×288, and each small
     torch call costs several µs of dispatch, which dominates when the arithmetic is ~20 µs."""
@@ -152,18 +175,21 @@ def _gram_steps_cpu(correlations: torch.Tensor, gram: torch.Tensor,
     picks, coefficients = [], []
     for _ in range(sparsity):
         np.abs(values, out=magnitudes)
-        picked = magnitudes.argmax(axis=1)                 # first maximum on ties, like torch
+        picked = magnitudes.argmax(axis=1)  # first maximum on ties, like torch
         coefficient = values[every_row, picked]
         picks.append(picked)
         coefficients.append(coefficient)
         torch.index_select(gram, 0, torch.from_numpy(picked), out=gram_rows)
         correlations.addcmul_(torch.from_numpy(coefficient).unsqueeze(1), gram_rows, value=-1.0)
-    return torch.from_numpy(np.stack(picks, axis=1)), torch.from_numpy(np.stack(coefficients, axis=1))
+    return torch.from_numpy(np.stack(picks, axis=1)), torch.from_numpy(
+        np.stack(coefficients, axis=1)
+    )
 
 
 @torch.no_grad()
-def matching_pursuit_recompute(patches: torch.Tensor, dictionary: torch.Tensor,
-                               sparsity: int) -> SparseCode:
+def matching_pursuit_recompute(
+    patches: torch.Tensor, dictionary: torch.Tensor, sparsity: int
+) -> SparseCode:
     """The straightforward batched MP: correlations recomputed from the residual at every step."""
     _check_inputs(patches, dictionary, sparsity)
     residuals = patches.clone()
@@ -175,6 +201,6 @@ def matching_pursuit_recompute(patches: torch.Tensor, dictionary: torch.Tensor,
         picked = _abs_argmax(correlations)
         coefficient = correlations.gather(1, picked.unsqueeze(1))
         atom_indices[:, step] = picked
-        coefficients[:, step:step + 1] = coefficient
+        coefficients[:, step : step + 1] = coefficient
         residuals -= coefficient * dictionary.index_select(0, picked)
     return _finish(patches, dictionary, atom_indices, coefficients, residuals)

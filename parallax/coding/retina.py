@@ -25,8 +25,9 @@ sky, floor, an untextured wall) becomes exactly zero instead of amplified roundi
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 import cv2
 import numpy as np
@@ -56,27 +57,35 @@ class ScaleSpec:
     stride: int
 
     @classmethod
-    def from_mapping(cls, name: str, spec: Mapping[str, Any]) -> "ScaleSpec":
+    def from_mapping(cls, name: str, spec: Mapping[str, Any]) -> ScaleSpec:
         """Build from a config mapping, naming ``scale_specs.<name>.<key>`` in every error."""
         expected = {"window", "subsample", "patch", "stride"}
         keys = set(spec.keys())
         if keys != expected:
-            raise ValueError(f"scale_specs.{name} must have exactly the keys {sorted(expected)}, "
-                             f"got {sorted(keys)}")
+            raise ValueError(
+                f"scale_specs.{name} must have exactly the keys {sorted(expected)}, "
+                f"got {sorted(keys)}"
+            )
         values = {}
         for key in sorted(expected):
             value = spec[key]
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(f"scale_specs.{name}.{key} must be a positive integer, got {value!r}")
+                raise ValueError(
+                    f"scale_specs.{name}.{key} must be a positive integer, got {value!r}"
+                )
             values[key] = int(value)
         levels = math.log2(values["subsample"])
         if levels != int(levels):
-            raise ValueError(f"scale_specs.{name}.subsample must be a power of 2 (Gaussian pyramid), "
-                             f"got {values['subsample']}")
+            raise ValueError(
+                f"scale_specs.{name}.subsample must be a power of 2 (Gaussian pyramid), "
+                f"got {values['subsample']}"
+            )
         result = cls(**values)
         if result.subsampled_size < result.patch:
-            raise ValueError(f"scale_specs.{name}: window {result.window} sub-sampled ×{result.subsample} "
-                             f"gives {result.subsampled_size} px, smaller than patch {result.patch}")
+            raise ValueError(
+                f"scale_specs.{name}: window {result.window} sub-sampled ×{result.subsample} "
+                f"gives {result.subsampled_size} px, smaller than patch {result.patch}"
+            )
         return result
 
     @property
@@ -98,7 +107,7 @@ class ScaleSpec:
     @property
     def patch_count(self) -> int:
         """P_N, patches per image: 23² = 529 coarse, 17² = 289 fine."""
-        return self.patches_per_side ** 2
+        return self.patches_per_side**2
 
     @property
     def half_dim(self) -> int:
@@ -120,20 +129,26 @@ def as_gray_batch(images: Any, device: torch.device | None = None) -> torch.Tens
     elif isinstance(images, np.ndarray):
         tensor = torch.from_numpy(np.ascontiguousarray(images))
     else:
-        raise ValueError(f"images must be a torch tensor or a numpy array, got {type(images).__name__}")
+        raise ValueError(
+            f"images must be a torch tensor or a numpy array, got {type(images).__name__}"
+        )
     if tensor.dim() == 4 and tensor.shape[-1] != 3:
         raise ValueError(f"RGB images must be (B,H,W,3), got shape {tuple(tensor.shape)}")
     if tensor.dim() not in (3, 4):
-        raise ValueError(f"images must be (B,H,W,3) RGB or (B,H,W) gray, got shape {tuple(tensor.shape)}")
+        raise ValueError(
+            f"images must be (B,H,W,3) RGB or (B,H,W) gray, got shape {tuple(tensor.shape)}"
+        )
     if tensor.dtype == torch.bool or tensor.is_complex():
         raise ValueError(f"images must be uint8 or float, got dtype {tensor.dtype}")
     scale = 1.0 / 255.0 if tensor.dtype == torch.uint8 else 1.0
     if tensor.dim() == 4:
-        tensor = rgb_to_gray_opencv(tensor) if tensor.device.type == "cpu" else rgb_to_gray_torch(tensor)
+        tensor = (
+            rgb_to_gray_opencv(tensor) if tensor.device.type == "cpu" else rgb_to_gray_torch(tensor)
+        )
     else:
         tensor = tensor.to(dtype=torch.float32)
     if scale != 1.0:
-        tensor.mul_(scale)   # a fresh float copy of uint8 input: scaling in place is safe
+        tensor.mul_(scale)  # a fresh float copy of uint8 input: scaling in place is safe
     return tensor.to(device=device) if device is not None else tensor
 
 
@@ -141,7 +156,7 @@ def rgb_to_gray_opencv(rgb: torch.Tensor) -> torch.Tensor:
     """(B,H,W,3) CPU tensor → (B,H,W) float32 by cv2.cvtColor, unrounded (≈3× faster than torch)."""
     pixels = rgb.contiguous().numpy()
     gray = np.empty(pixels.shape[:3], dtype=np.float32)
-    for image, out in zip(pixels, gray):   # straight into the batch: no np.stack copy
+    for image, out in zip(pixels, gray):  # straight into the batch: no np.stack copy
         cv2.cvtColor(image.astype(np.float32, copy=False), cv2.COLOR_RGB2GRAY, dst=out)
     return torch.from_numpy(gray)
 
@@ -158,7 +173,7 @@ def centre_window(gray: torch.Tensor, window: int) -> torch.Tensor:
     if window > height or window > width:
         raise ValueError(f"window {window} px does not fit in images of {height}×{width} px")
     top, left = (height - window) // 2, (width - window) // 2
-    return gray[..., top:top + window, left:left + window]
+    return gray[..., top : top + window, left : left + window]
 
 
 def pyramid_down(gray: torch.Tensor, levels: int) -> torch.Tensor:
@@ -180,7 +195,9 @@ def pyramid_down_torch(gray: torch.Tensor, levels: int) -> torch.Tensor:
     image = gray[:, None]
     for _ in range(levels):
         if min(image.shape[-2:]) < 3:
-            raise ValueError(f"image of {tuple(image.shape[-2:])} px is too small for another pyramid level")
+            raise ValueError(
+                f"image of {tuple(image.shape[-2:])} px is too small for another pyramid level"
+            )
         # mode="reflect" is OpenCV's BORDER_REFLECT_101 (edge pixel not repeated).
         image = F.conv2d(F.pad(image, (2, 2, 2, 2), mode="reflect"), kernel, stride=2)
     return image[:, 0]
@@ -188,7 +205,7 @@ def pyramid_down_torch(gray: torch.Tensor, levels: int) -> torch.Tensor:
 
 def extract_patches(image: torch.Tensor, patch: int, stride: int) -> torch.Tensor:
     """(B,h,w) → (B,P,patch²) patches in row-major order of their position; pixels row-major."""
-    windows = image.unfold(1, patch, stride).unfold(2, patch, stride)   # (B, rows, cols, p, p)
+    windows = image.unfold(1, patch, stride).unfold(2, patch, stride)  # (B, rows, cols, p, p)
     return windows.reshape(image.shape[0], -1, patch * patch)
 
 
@@ -213,7 +230,9 @@ def prepare_reference(raw_reference: torch.Tensor, normalisation: str) -> torch.
     return zero_mean_unit_norm(raw_reference) if normalisation == "per_half" else raw_reference
 
 
-def stack_pair(reference: torch.Tensor, raw_current: torch.Tensor, normalisation: str) -> torch.Tensor:
+def stack_pair(
+    reference: torch.Tensor, raw_current: torch.Tensor, normalisation: str
+) -> torch.Tensor:
     """γ = [I0 half ; I(t) half], (B,P,K); ``reference`` comes from :func:`prepare_reference`."""
     check_normalisation(normalisation)
     if normalisation == "per_half":

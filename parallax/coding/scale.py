@@ -9,14 +9,19 @@ dictionary with every patch of every image of the call. The I0 patches are cut o
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import torch
 from torch import nn
 
-from .dictionary import (exact_pooled_activity_kernel, gradient_step_, pooled_activity_of,
-                         random_dictionary, reconstruction_error)
+from .dictionary import (
+    exact_pooled_activity_kernel,
+    gradient_step_,
+    pooled_activity_of,
+    random_dictionary,
+    reconstruction_error,
+)
 from .pursuit import SparseCode, gram_matrix, matching_pursuit, matching_pursuit_recompute
 from .retina import ScaleSpec, prepare_reference, scale_patches, stack_pair
 
@@ -32,8 +37,8 @@ _KERNELS = {"gram": None, "gram_cpp": "cpp", "gram_torch": "torch"}
 class ScaleOutput:
     """What one scale reports for a batch of B images (computed before any dictionary update)."""
 
-    activity: torch.Tensor   # (B, N) θ^j
-    error: torch.Tensor      # (B,) e^j
+    activity: torch.Tensor  # (B, N) θ^j
+    error: torch.Tensor  # (B,) e^j
 
 
 class ScaleCoder(nn.Module):
@@ -42,8 +47,16 @@ class ScaleCoder(nn.Module):
     dictionary: torch.Tensor
     reference: torch.Tensor | None
 
-    def __init__(self, spec: ScaleSpec, atoms: int, sparsity: int, learning_rate: float,
-                 normalisation: str, generator: torch.Generator, pursuit: str = "gram") -> None:
+    def __init__(
+        self,
+        spec: ScaleSpec,
+        atoms: int,
+        sparsity: int,
+        learning_rate: float,
+        normalisation: str,
+        generator: torch.Generator,
+        pursuit: str = "gram",
+    ) -> None:
         super().__init__()
         if pursuit not in PURSUITS:
             raise ValueError(f"pursuit must be one of {PURSUITS}, got {pursuit!r}")
@@ -63,8 +76,12 @@ class ScaleCoder(nn.Module):
 
     def gram(self) -> torch.Tensor:
         """Φ·Φᵀ, recomputed only when the dictionary changed (a frozen coder reuses it)."""
-        key = (self.dictionary.data_ptr(), self.dictionary._version, self.dictionary.device,
-               self.dictionary.dtype)
+        key = (
+            self.dictionary.data_ptr(),
+            self.dictionary._version,
+            self.dictionary.device,
+            self.dictionary.dtype,
+        )
         if self._gram is None or key != self._gram_key:
             self._gram = gram_matrix(self.dictionary)
             self._gram_key = key
@@ -92,8 +109,14 @@ class ScaleCoder(nn.Module):
         see :func:`~parallax.coding.pursuit.matching_pursuit`)."""
         if self.pursuit == "recompute":
             return matching_pursuit_recompute(patches, self.dictionary, self.sparsity)
-        return matching_pursuit(patches, self.dictionary, self.sparsity, self.gram(),
-                                kernel=_KERNELS[self.pursuit], dense_codes=dense_codes)
+        return matching_pursuit(
+            patches,
+            self.dictionary,
+            self.sparsity,
+            self.gram(),
+            kernel=_KERNELS[self.pursuit],
+            dense_codes=dense_codes,
+        )
 
     @torch.no_grad()
     def learn_from(self, code: SparseCode | Sequence[SparseCode]) -> None:
@@ -106,17 +129,22 @@ class ScaleCoder(nn.Module):
             self.gram()
 
     @torch.no_grad()
-    def encode_images(self, gray: torch.Tensor,
-                      robots: slice = slice(None)) -> tuple[ScaleOutput, SparseCode]:
+    def encode_images(
+        self, gray: torch.Tensor, robots: slice = slice(None)
+    ) -> tuple[ScaleOutput, SparseCode]:
         """θ^j and e^j of (B,H,W) gray images against the references of ``robots``, and the
         sparse code a dictionary step learns from; the dictionary is left alone."""
         pairs = self.patch_pairs(gray, robots)
         batch, patches, dim = pairs.shape
         # θ straight from the picks where the compiled kernel gives torch's θ exactly: the dense
         # (M, N) codes are most of the pursuit's memory traffic.
-        from_picks = (self.pursuit != "recompute" and pairs.device.type == "cpu"
-                      and exact_pooled_activity_kernel(patches, self.atoms, self.sparsity,
-                                                       pairs.dtype, _KERNELS[self.pursuit]))
+        from_picks = (
+            self.pursuit != "recompute"
+            and pairs.device.type == "cpu"
+            and exact_pooled_activity_kernel(
+                patches, self.atoms, self.sparsity, pairs.dtype, _KERNELS[self.pursuit]
+            )
+        )
         code = self.encode(pairs.reshape(batch * patches, dim), dense_codes=not from_picks)
         output = ScaleOutput(
             activity=pooled_activity_of(code, batch, self.atoms),
@@ -125,6 +153,8 @@ class ScaleCoder(nn.Module):
         return output, code
 
     def extra_repr(self) -> str:
-        return (f"spec={self.spec}, atoms={self.atoms}, sparsity={self.sparsity}, "
-                f"learning_rate={self.learning_rate}, normalisation={self.normalisation!r}, "
-                f"pursuit={self.pursuit!r}")
+        return (
+            f"spec={self.spec}, atoms={self.atoms}, sparsity={self.sparsity}, "
+            f"learning_rate={self.learning_rate}, normalisation={self.normalisation!r}, "
+            f"pursuit={self.pursuit!r}"
+        )

@@ -10,11 +10,26 @@ from parallax.distance.levenberg_marquardt import LevenbergMarquardt, LMRunResul
 from parallax.distance.metrics import distance_error_by_range
 from parallax.distance.network import DistanceMLP
 from parallax.distance.queue_memory import QueueMemory
-from parallax.distance.targets import TARGET_SOURCES, GroundTruthTargets, TargetSource, register_target_source
+from parallax.distance.targets import (
+    TARGET_SOURCES,
+    GroundTruthTargets,
+    TargetSource,
+    register_target_source,
+)
 from parallax.distance.weighting import position_weights, sensitive_positions
 
 __all__ = [
-    "DistanceLearner", "DistanceMLP", "GroundTruthTargets", "LMRunResult", "LMStepResult", "LevenbergMarquardt",
-    "QueueMemory", "TARGET_SOURCES", "TargetSource", "distance_error_by_range", "position_weights",
-    "register_target_source", "sensitive_positions",
+    "DistanceLearner",
+    "DistanceMLP",
+    "GroundTruthTargets",
+    "LMRunResult",
+    "LMStepResult",
+    "LevenbergMarquardt",
+    "QueueMemory",
+    "TARGET_SOURCES",
+    "TargetSource",
+    "distance_error_by_range",
+    "position_weights",
+    "register_target_source",
+    "sensitive_positions",
 ]

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import statistics
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -28,7 +28,9 @@ from parallax.distance.synthetic import PAPER_LATERAL_POSITIONS_M, paper_regress
 SCIPY_MAX_NFEV = 40
 
 
-def _median_ms(operation: Callable[[], object], repeats: int, before: Callable[[], None] = lambda: None) -> float:
+def _median_ms(
+    operation: Callable[[], object], repeats: int, before: Callable[[], None] = lambda: None
+) -> float:
     times = []
     for _ in range(repeats):
         before()
@@ -40,30 +42,47 @@ def _median_ms(operation: Callable[[], object], repeats: int, before: Callable[[
 
 def _paper_sized_learner() -> DistanceLearner:
     pans, distances = paper_regression(300, np.random.default_rng(0))
-    learner = DistanceLearner(PAPER_LATERAL_POSITIONS_M, queue_size=300, hidden=30,
-                              initial_epochs=5, epochs_per_call=1, seed=0)
+    learner = DistanceLearner(
+        PAPER_LATERAL_POSITIONS_M,
+        queue_size=300,
+        hidden=30,
+        initial_epochs=5,
+        epochs_per_call=1,
+        seed=0,
+    )
     for s, distance in zip(pans, distances):
         learner.observe(s, distance)
     return learner
 
 
-def _scipy_fit(optimizer: LevenbergMarquardt, inputs: torch.Tensor, targets: torch.Tensor,
-               start: torch.Tensor, max_nfev: int = SCIPY_MAX_NFEV) -> tuple[float, float, int]:
+def _scipy_fit(
+    optimizer: LevenbergMarquardt,
+    inputs: torch.Tensor,
+    targets: torch.Tensor,
+    start: torch.Tensor,
+    max_nfev: int = SCIPY_MAX_NFEV,
+) -> tuple[float, float, int]:
     """(milliseconds, SSE, Jacobian evaluations) of MINPACK from ``start``."""
     batch = (inputs, targets)
     padding = max(optimizer.num_params - targets.numel(), 0)
 
     def residuals(flat: np.ndarray) -> np.ndarray:
         with torch.no_grad():
-            values = optimizer._residuals(torch.from_numpy(flat), _regression_residuals, batch).numpy()
+            values = optimizer._residuals(
+                torch.from_numpy(flat), _regression_residuals, batch
+            ).numpy()
         return np.concatenate([values, np.zeros(padding)])
 
     def jacobian(flat: np.ndarray) -> np.ndarray:
-        values = optimizer._jacobian(torch.from_numpy(flat), _regression_residuals, batch, True).numpy()
+        values = optimizer._jacobian(
+            torch.from_numpy(flat), _regression_residuals, batch, True
+        ).numpy()
         return np.concatenate([values, np.zeros((padding, values.shape[1]))])
 
     begin = time.perf_counter()
-    solution = least_squares(residuals, start.numpy().copy(), jac=jacobian, method="lm", max_nfev=max_nfev)
+    solution = least_squares(
+        residuals, start.numpy().copy(), jac=jacobian, method="lm", max_nfev=max_nfev
+    )
     elapsed = 1e3 * (time.perf_counter() - begin)
     return elapsed, 2.0 * float(solution.cost), int(solution.njev)
 
@@ -97,7 +116,9 @@ def run(repeats: int = 50) -> dict[str, float]:
     def jacobian() -> None:
         optimizer._jacobian(start, _regression_residuals, (inputs, targets), True)
 
-    full_jacobian = optimizer._jacobian(start, _regression_residuals, (inputs, targets), True).double()
+    full_jacobian = optimizer._jacobian(
+        start, _regression_residuals, (inputs, targets), True
+    ).double()
     with torch.no_grad():
         errors = optimizer._residuals(start, _regression_residuals, (inputs, targets)).double()
 
@@ -115,17 +136,27 @@ def run(repeats: int = 50) -> dict[str, float]:
     learner.epochs_per_call = 10
     snapshot = learner.state_dict()
     observe_s, observe_d = paper_regression(1, np.random.default_rng(1))
-    results["observe_10_epochs_ms"] = _median_ms(lambda: learner.observe(observe_s[0], float(observe_d[0])),
-                                                 max(1, repeats // 5), lambda: learner.load_state_dict(snapshot))
+    results["observe_10_epochs_ms"] = _median_ms(
+        lambda: learner.observe(observe_s[0], float(observe_d[0])),
+        max(1, repeats // 5),
+        lambda: learner.load_state_dict(snapshot),
+    )
     learner.load_state_dict(snapshot)
 
     scipy_ms, scipy_sse, scipy_jacobians = _scipy_fit(optimizer, inputs, targets, start)
     restore()
     begin = time.perf_counter()
-    ours = optimizer.run(_regression_residuals, inputs, targets, epochs=max(scipy_jacobians, 1), per_sample=True)
-    results.update(scipy_fit_ms=scipy_ms, scipy_sse=scipy_sse, scipy_jacobians=float(scipy_jacobians),
-                   lm_same_jacobians_ms=1e3 * (time.perf_counter() - begin), lm_same_jacobians_sse=ours.sse,
-                   start_sse=float(errors.square().sum()))
+    ours = optimizer.run(
+        _regression_residuals, inputs, targets, epochs=max(scipy_jacobians, 1), per_sample=True
+    )
+    results.update(
+        scipy_fit_ms=scipy_ms,
+        scipy_sse=scipy_sse,
+        scipy_jacobians=float(scipy_jacobians),
+        lm_same_jacobians_ms=1e3 * (time.perf_counter() - begin),
+        lm_same_jacobians_sse=ours.sse,
+        start_sse=float(errors.square().sum()),
+    )
     return results
 
 

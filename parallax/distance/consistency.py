@@ -25,10 +25,12 @@ from torch import Tensor
 MAD_TO_SD = 1.4826
 
 
-def check_settings(mads: "float | None", neighbours: int) -> None:
+def check_settings(mads: float | None, neighbours: int) -> None:
     """Raise a one-line ValueError for a threshold or neighbourhood that cannot work."""
     if mads is not None and not (math.isfinite(float(mads)) and float(mads) > 0):
-        raise ValueError(f"outlier_mads must be a positive number of MADs or null (off), got {mads!r}")
+        raise ValueError(
+            f"outlier_mads must be a positive number of MADs or null (off), got {mads!r}"
+        )
     if int(neighbours) != neighbours or neighbours < 2:
         raise ValueError(f"outlier_neighbours must be an integer ≥ 2, got {neighbours!r}")
 

@@ -21,7 +21,7 @@ the paper's.
 from __future__ import annotations
 
 import math
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import torch
@@ -35,12 +35,22 @@ from parallax.distance.targets import TargetSource, make_target_source
 from parallax.distance.weighting import position_weights, sensitive_positions
 
 DEFAULT_SENSITIVITY = {"patch": 10, "subsample": 8.0, "nearest_distance": 3.0, "tolerance": 2.5}
-DEFAULT_LM = {"mu": 1e-3, "mu_decrease": 0.1, "mu_increase": 10.0, "mu_max": 1e10, "min_grad": 1e-7,
-              "max_params": 5000, "max_jacobian_elements": 20_000_000, "weight_decay": 0.0}
+DEFAULT_LM = {
+    "mu": 1e-3,
+    "mu_decrease": 0.1,
+    "mu_increase": 10.0,
+    "mu_max": 1e10,
+    "min_grad": 1e-7,
+    "max_params": 5000,
+    "max_jacobian_elements": 20_000_000,
+    "weight_decay": 0.0,
+}
 STATE_VERSION = 1
 
 
-def _merged(name: str, defaults: Mapping[str, float], given: Mapping[str, float] | None) -> dict[str, float]:
+def _merged(
+    name: str, defaults: Mapping[str, float], given: Mapping[str, float] | None
+) -> dict[str, float]:
     given = dict(given or {})
     unknown = sorted(set(given) - set(defaults))
     if unknown:
@@ -55,16 +65,32 @@ def _regression_residuals(forward, inputs: Tensor, targets: Tensor) -> Tensor:  
 class DistanceLearner:
     """Queue memory + weighting + MLP + Levenberg–Marquardt, trained as s vectors arrive."""
 
-    def __init__(self, lateral_positions: Sequence[float], queue_size: int = 300, hidden: int = 30,
-                 weighting: bool = True, y: float = 1.0, sensitivity: Mapping[str, float] | None = None,
-                 epochs_per_call: int = 10, initial_epochs: int = 100, lm: Mapping[str, float] | None = None,
-                 targets: "str | TargetSource" = "ground_truth", seed: int = 0,
-                 input_scaling: str = "global", outlier_mads: float | None = None,
-                 outlier_neighbours: int = 8) -> None:
+    def __init__(
+        self,
+        lateral_positions: Sequence[float],
+        queue_size: int = 300,
+        hidden: int = 30,
+        weighting: bool = True,
+        y: float = 1.0,
+        sensitivity: Mapping[str, float] | None = None,
+        epochs_per_call: int = 10,
+        initial_epochs: int = 100,
+        lm: Mapping[str, float] | None = None,
+        targets: str | TargetSource = "ground_truth",
+        seed: int = 0,
+        input_scaling: str = "global",
+        outlier_mads: float | None = None,
+        outlier_neighbours: int = 8,
+    ) -> None:
         self.lateral_positions = [float(value) for value in lateral_positions]
         if not self.lateral_positions or not all(math.isfinite(v) for v in self.lateral_positions):
-            raise ValueError(f"lateral_positions must be a non-empty list of finite metres, got {lateral_positions!r}")
-        for name, value in (("epochs_per_call", epochs_per_call), ("initial_epochs", initial_epochs)):
+            raise ValueError(
+                f"lateral_positions must be a non-empty list of finite metres, got {lateral_positions!r}"
+            )
+        for name, value in (
+            ("epochs_per_call", epochs_per_call),
+            ("initial_epochs", initial_epochs),
+        ):
             if int(value) != value or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         self.epochs_per_call, self.initial_epochs = int(epochs_per_call), int(initial_epochs)
@@ -74,10 +100,16 @@ class DistanceLearner:
         self.sensitivity = _merged("sensitivity", DEFAULT_SENSITIVITY, sensitivity)
         self.sensitive = sensitive_positions(self.lateral_positions, **self.sensitivity)
         flags = self.sensitive if weighting else [False] * len(self.lateral_positions)
-        self.weights = torch.tensor(position_weights(self.lateral_positions, flags, float(y)), dtype=torch.float64)
+        self.weights = torch.tensor(
+            position_weights(self.lateral_positions, flags, float(y)), dtype=torch.float64
+        )
 
-        self.network = DistanceMLP(len(self.lateral_positions), hidden, input_scaling,
-                                   generator=torch.Generator().manual_seed(int(seed)))
+        self.network = DistanceMLP(
+            len(self.lateral_positions),
+            hidden,
+            input_scaling,
+            generator=torch.Generator().manual_seed(int(seed)),
+        )
         self.optimizer = LevenbergMarquardt(self.network, **_merged("lm", DEFAULT_LM, lm))
         self.queue = QueueMemory(queue_size, len(self.lateral_positions))
         self.target_source = make_target_source(targets)
@@ -89,16 +121,24 @@ class DistanceLearner:
         """The queue is full and the network has been trained at least once."""
         return self.queue.is_full and self.fits > 0
 
-    def _as_inputs(self, s: "Tensor | np.ndarray | Sequence[float]") -> Tensor:
-        inputs = torch.as_tensor(np.asarray(s, dtype=np.float64) if not isinstance(s, Tensor) else s)
+    def _as_inputs(self, s: Tensor | np.ndarray | Sequence[float]) -> Tensor:
+        inputs = torch.as_tensor(
+            np.asarray(s, dtype=np.float64) if not isinstance(s, Tensor) else s
+        )
         inputs = inputs.detach().to(device=self.weights.device, dtype=torch.float64)
         if inputs.shape[-1:] != self.weights.shape or inputs.dim() > 2:
-            raise ValueError(f"pans must have shape (r,) or (n, r) with r={self.weights.numel()}, got {tuple(inputs.shape)}")
+            raise ValueError(
+                f"pans must have shape (r,) or (n, r) with r={self.weights.numel()}, got {tuple(inputs.shape)}"
+            )
         if not bool(torch.isfinite(inputs).all()):
-            raise ValueError(f"pans must be finite, got {inputs[~torch.isfinite(inputs)][0].item()!r}")
+            raise ValueError(
+                f"pans must be finite, got {inputs[~torch.isfinite(inputs)][0].item()!r}"
+            )
         return inputs
 
-    def observe(self, s: "Tensor | np.ndarray | Sequence[float]", distance: float) -> dict[str, float]:
+    def observe(
+        self, s: Tensor | np.ndarray | Sequence[float], distance: float
+    ) -> dict[str, float]:
         """Queue (s, target from ``distance``); fit once the queue is full. Returns floats:
 
         trained (0/1), loss (MSE in m² over the vectors the fit used, after the fit; NaN before
@@ -109,11 +149,14 @@ class DistanceLearner:
         """
         inputs = self._as_inputs(s)
         if inputs.dim() != 1:
-            raise ValueError(f"observe takes one vector s of shape ({self.weights.numel()},), got {tuple(inputs.shape)}")
+            raise ValueError(
+                f"observe takes one vector s of shape ({self.weights.numel()},), got {tuple(inputs.shape)}"
+            )
         return self.observe_batch(inputs[None, :], [distance])
 
-    def observe_batch(self, S: "Tensor | np.ndarray | Sequence[Sequence[float]]",
-                      distances: Sequence[float]) -> dict[str, float]:
+    def observe_batch(
+        self, S: Tensor | np.ndarray | Sequence[Sequence[float]], distances: Sequence[float]
+    ) -> dict[str, float]:
         """Queue the rows of S in order (as ``observe`` would, one by one), then fit once.
 
         B robots in lockstep give B vectors s at a time; one fit for all of them is the distance
@@ -122,14 +165,26 @@ class DistanceLearner:
         """
         inputs = self._as_inputs(S)
         if inputs.dim() != 2 or inputs.shape[0] != len(distances):
-            raise ValueError(f"observe_batch takes S of shape (n, {self.weights.numel()}) and n distances, "
-                             f"got {tuple(inputs.shape)} and {len(distances)}")
+            raise ValueError(
+                f"observe_batch takes S of shape (n, {self.weights.numel()}) and n distances, "
+                f"got {tuple(inputs.shape)} and {len(distances)}"
+            )
         for row, distance in zip(inputs, distances):
             self.queue.push(row, self.target_source(row, distance))
             self.observations += 1
-        stats = {"trained": 0.0, "loss": math.nan, "rmse_m": math.nan, "epochs": 0.0, "mu": self.optimizer.mu,
-                 "grad_norm": math.nan, "stopped_min_grad": 0.0, "stopped_mu_max": 0.0,
-                 "stopped_non_finite": 0.0, "queue_fill": float(self.queue.fill), "outliers": 0.0}
+        stats = {
+            "trained": 0.0,
+            "loss": math.nan,
+            "rmse_m": math.nan,
+            "epochs": 0.0,
+            "mu": self.optimizer.mu,
+            "grad_norm": math.nan,
+            "stopped_min_grad": 0.0,
+            "stopped_mu_max": 0.0,
+            "stopped_non_finite": 0.0,
+            "queue_fill": float(self.queue.fill),
+            "outliers": 0.0,
+        }
         if not self.queue.is_full:
             return stats
         return {**stats, **self._fit()}
@@ -145,32 +200,45 @@ class DistanceLearner:
         weighted = inputs * self.weights
         self.network.fit_scaling(weighted, targets, preserve_function=self.fits > 0)
         epochs = self.initial_epochs if self.fits == 0 else self.epochs_per_call
-        result = self.optimizer.run(_regression_residuals, weighted, targets, epochs=epochs, per_sample=True)
+        result = self.optimizer.run(
+            _regression_residuals, weighted, targets, epochs=epochs, per_sample=True
+        )
         self.fits += 1
         mse = result.sse / targets.numel()
         if self.optimizer.weight_decay:  # result.sse holds λ‖w‖² too; report the data's error only
             with torch.no_grad():
                 mse = float(_regression_residuals(self.network, weighted, targets).square().mean())
-        return dict(trained=1.0, loss=mse, rmse_m=math.sqrt(mse), epochs=float(result.epochs), mu=result.mu,
-                    grad_norm=result.grad_norm, stopped_min_grad=float(result.stop == "min_grad"),
-                    stopped_mu_max=float(result.stop == "mu_max"),
-                    stopped_non_finite=float(result.stop == "non_finite_jacobian"),
-                    outliers=float(self.queue.fill - targets.numel()))
+        return dict(
+            trained=1.0,
+            loss=mse,
+            rmse_m=math.sqrt(mse),
+            epochs=float(result.epochs),
+            mu=result.mu,
+            grad_norm=result.grad_norm,
+            stopped_min_grad=float(result.stop == "min_grad"),
+            stopped_mu_max=float(result.stop == "mu_max"),
+            stopped_non_finite=float(result.stop == "non_finite_jacobian"),
+            outliers=float(self.queue.fill - targets.numel()),
+        )
 
-    def predict(self, S: "Tensor | np.ndarray | Sequence[Sequence[float]]") -> "Tensor | np.ndarray":
+    def predict(
+        self, S: Tensor | np.ndarray | Sequence[Sequence[float]]
+    ) -> Tensor | np.ndarray:
         """(n, r) pans in degrees → (n,) metres (or (r,) → a scalar), weighted as in training.
 
         Returns a float64 tensor for a tensor input, a NumPy array otherwise.
         """
         if not self.is_ready:
-            raise RuntimeError(f"distance learner is not ready (queue {self.queue.fill}/{self.queue.capacity}, "
-                               f"{self.fits} fits); check is_ready before predict")
+            raise RuntimeError(
+                f"distance learner is not ready (queue {self.queue.fill}/{self.queue.capacity}, "
+                f"{self.fits} fits); check is_ready before predict"
+            )
         inputs = self._as_inputs(S)
         with torch.no_grad():
             distances = self.network(inputs * self.weights)
         return distances.to(S.device) if isinstance(S, Tensor) else distances.cpu().numpy()
 
-    def to(self, device: "torch.device | str") -> "DistanceLearner":
+    def to(self, device: torch.device | str) -> DistanceLearner:
         """Moves the network, the queue and the input weights to ``device`` (in place; returns self).
 
         Fits then run there; ``observe`` and ``predict`` accept inputs on any device.
@@ -184,8 +252,11 @@ class DistanceLearner:
         """Everything needed to resume bit-identically (tensors are copies)."""
         return {
             "version": STATE_VERSION,
-            "shape": {"inputs": self.weights.numel(), "queue_size": self.queue.capacity,
-                      "hidden": self.network.hidden_layer.out_features},
+            "shape": {
+                "inputs": self.weights.numel(),
+                "queue_size": self.queue.capacity,
+                "hidden": self.network.hidden_layer.out_features,
+            },
             "weights": self.weights.clone(),
             "network": {k: v.clone() for k, v in self.network.state_dict().items()},
             "queue": self.queue.state_dict(),
@@ -197,14 +268,23 @@ class DistanceLearner:
 
     def load_state_dict(self, state: Mapping[str, object]) -> None:
         if state.get("version") != STATE_VERSION:
-            raise ValueError(f"distance learner state version {state.get('version')!r}, expected {STATE_VERSION}")
-        shape = {"inputs": self.weights.numel(), "queue_size": self.queue.capacity,
-                 "hidden": self.network.hidden_layer.out_features}
+            raise ValueError(
+                f"distance learner state version {state.get('version')!r}, expected {STATE_VERSION}"
+            )
+        shape = {
+            "inputs": self.weights.numel(),
+            "queue_size": self.queue.capacity,
+            "hidden": self.network.hidden_layer.out_features,
+        }
         if state["shape"] != shape:
-            raise ValueError(f"distance learner state is for {state['shape']!r}, this learner is {shape!r}")
+            raise ValueError(
+                f"distance learner state is for {state['shape']!r}, this learner is {shape!r}"
+            )
         if not torch.equal(torch.as_tensor(state["weights"]).cpu(), self.weights.cpu()):
-            raise ValueError(f"state was saved with input weights {state['weights']!r}, this learner uses "
-                             f"{self.weights!r} (different L, y or sensitivity)")
+            raise ValueError(
+                f"state was saved with input weights {state['weights']!r}, this learner uses "
+                f"{self.weights!r} (different L, y or sensitivity)"
+            )
         self.network.load_state_dict(state["network"])  # type: ignore[arg-type]
         self.queue.load_state_dict(state["queue"])  # type: ignore[arg-type]
         self.optimizer.load_state_dict(state["optimizer"])  # type: ignore[arg-type]

@@ -18,8 +18,8 @@ sample at a time under ``vmap`` (~7× faster than a full ``jacrev`` for the dist
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import torch
 from torch import Tensor, nn
@@ -64,10 +64,19 @@ def _positive(name: str, value: float) -> float:
 class LevenbergMarquardt:
     """``trainlm``-style Levenberg–Marquardt over the trainable parameters of ``model``."""
 
-    def __init__(self, model: nn.Module, *, mu: float = 1e-3, mu_decrease: float = 0.1,
-                 mu_increase: float = 10.0, mu_max: float = 1e10, min_grad: float = 1e-7,
-                 max_params: int = 5000, max_jacobian_elements: int = 20_000_000,
-                 weight_decay: float = 0.0) -> None:
+    def __init__(
+        self,
+        model: nn.Module,
+        *,
+        mu: float = 1e-3,
+        mu_decrease: float = 0.1,
+        mu_increase: float = 10.0,
+        mu_max: float = 1e10,
+        min_grad: float = 1e-7,
+        max_params: int = 5000,
+        max_jacobian_elements: int = 20_000_000,
+        weight_decay: float = 0.0,
+    ) -> None:
         self.model = model
         self.weight_decay = float(weight_decay)
         if not math.isfinite(self.weight_decay) or self.weight_decay < 0:
@@ -76,7 +85,9 @@ class LevenbergMarquardt:
         self.mu_decrease = _positive("mu_decrease", mu_decrease)
         self.mu_increase = _positive("mu_increase", mu_increase)
         if self.mu_decrease >= 1 or self.mu_increase <= 1:
-            raise ValueError(f"need mu_decrease < 1 < mu_increase, got {mu_decrease!r} and {mu_increase!r}")
+            raise ValueError(
+                f"need mu_decrease < 1 < mu_increase, got {mu_decrease!r} and {mu_increase!r}"
+            )
         self.mu_max = _positive("mu_max", mu_max)
         self.min_grad = float(min_grad)
         if not math.isfinite(self.min_grad) or self.min_grad < 0:
@@ -94,7 +105,8 @@ class LevenbergMarquardt:
             raise ValueError(
                 f"{type(model).__name__} has {self.num_params} trainable parameters, more than "
                 f"max_params={max_params}: a dense Levenberg–Marquardt step needs a "
-                f"{self.num_params}×{self.num_params} matrix; use a first-order optimiser instead")
+                f"{self.num_params}×{self.num_params} matrix; use a first-order optimiser instead"
+            )
 
     # -- parameters as one flat vector ------------------------------------------------------
     def _flat(self) -> Tensor:
@@ -109,7 +121,9 @@ class LevenbergMarquardt:
             for param, value in zip(self._params, self._unflatten(flat).values()):
                 param.copy_(value)
 
-    def _residuals(self, flat: Tensor, closure: ResidualClosure, batch: tuple[Tensor, ...]) -> Tensor:
+    def _residuals(
+        self, flat: Tensor, closure: ResidualClosure, batch: tuple[Tensor, ...]
+    ) -> Tensor:
         params = self._unflatten(flat)
 
         def forward(*args: object, **kwargs: object) -> Tensor:
@@ -118,11 +132,14 @@ class LevenbergMarquardt:
         residuals = closure(forward, *batch).reshape(-1)
         if self.weight_decay:
             # Σe² + λ‖w‖² is a sum of squares too: the parameters become extra residuals √λ·w
-            residuals = torch.cat([residuals, math.sqrt(self.weight_decay) * flat.to(residuals.dtype)])
+            residuals = torch.cat(
+                [residuals, math.sqrt(self.weight_decay) * flat.to(residuals.dtype)]
+            )
         return residuals
 
-    def _jacobian(self, flat: Tensor, closure: ResidualClosure, batch: tuple[Tensor, ...],
-                  per_sample: bool) -> Tensor:
+    def _jacobian(
+        self, flat: Tensor, closure: ResidualClosure, batch: tuple[Tensor, ...], per_sample: bool
+    ) -> Tensor:
         if not per_sample:
             return jacrev(lambda f: self._residuals(f, closure, batch))(flat)
 
@@ -135,18 +152,26 @@ class LevenbergMarquardt:
             return closure(forward, *(t.unsqueeze(0) for t in sample)).reshape(-1)
 
         in_dims = (None,) + (0,) * len(batch)
-        jacobian = vmap(jacrev(one_sample), in_dims=in_dims)(flat, *batch).reshape(-1, self.num_params)
+        jacobian = vmap(jacrev(one_sample), in_dims=in_dims)(flat, *batch).reshape(
+            -1, self.num_params
+        )
         if self.weight_decay:
-            penalty = math.sqrt(self.weight_decay) * torch.eye(self.num_params, dtype=jacobian.dtype, device=jacobian.device)
+            penalty = math.sqrt(self.weight_decay) * torch.eye(
+                self.num_params, dtype=jacobian.dtype, device=jacobian.device
+            )
             jacobian = torch.cat([jacobian, penalty])
         return jacobian
 
     # -- the algorithm ------------------------------------------------------------------------
-    def step(self, closure: ResidualClosure, *batch: Tensor, per_sample: bool = False) -> LMStepResult:
+    def step(
+        self, closure: ResidualClosure, *batch: Tensor, per_sample: bool = False
+    ) -> LMStepResult:
         """One epoch: a Jacobian, then damped steps until one lowers Σe² or μ > mu_max."""
         if per_sample and (not batch or len({t.shape[0] for t in batch}) != 1):
-            raise ValueError("per_sample=True needs batch tensors that share their first dimension, "
-                             f"got shapes {[tuple(t.shape) for t in batch]}")
+            raise ValueError(
+                "per_sample=True needs batch tensors that share their first dimension, "
+                f"got shapes {[tuple(t.shape) for t in batch]}"
+            )
         flat = self._flat()
         with torch.no_grad():
             residuals = self._residuals(flat, closure, batch)
@@ -159,7 +184,8 @@ class LevenbergMarquardt:
         if jacobian_elements > self.max_jacobian_elements:
             raise ValueError(
                 f"Jacobian of {residuals.numel()} residuals × {self.num_params} parameters = "
-                f"{jacobian_elements} elements exceeds max_jacobian_elements={self.max_jacobian_elements}")
+                f"{jacobian_elements} elements exceeds max_jacobian_elements={self.max_jacobian_elements}"
+            )
 
         jacobian = self._jacobian(flat, closure, batch, per_sample).double()
         errors = residuals.double()
@@ -185,8 +211,9 @@ class LevenbergMarquardt:
             self.mu *= self.mu_increase
         return LMStepResult(False, sse, grad_norm, self.mu, "mu_max")
 
-    def run(self, closure: ResidualClosure, *batch: Tensor, epochs: int,
-            per_sample: bool = False) -> LMRunResult:
+    def run(
+        self, closure: ResidualClosure, *batch: Tensor, epochs: int, per_sample: bool = False
+    ) -> LMRunResult:
         """Up to ``epochs`` epochs; stops early at min_grad or mu_max."""
         if int(epochs) != epochs or epochs < 1:
             raise ValueError(f"epochs must be a positive integer, got {epochs!r}")
@@ -229,7 +256,9 @@ class _DampedSolver:
         if int(info) != 0:
             return None
         if self.dual:
-            delta = -(self.jacobian.T @ torch.cholesky_solve(self.errors.unsqueeze(-1), factor)).squeeze(-1)
+            delta = -(
+                self.jacobian.T @ torch.cholesky_solve(self.errors.unsqueeze(-1), factor)
+            ).squeeze(-1)
         else:
             delta = -torch.cholesky_solve(self.gradient.unsqueeze(-1), factor).squeeze(-1)
         return delta if bool(torch.isfinite(delta).all()) else None

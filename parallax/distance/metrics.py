@@ -10,7 +10,7 @@ the mean over every sample (not the mean of the three ranges): that reproduces t
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -22,18 +22,22 @@ RANGES: dict[str, tuple[float, float, bool]] = {  # name: (low, high, high inclu
 }
 
 
-def _as_array(values: "Sequence[float] | np.ndarray | torch.Tensor") -> np.ndarray:
+def _as_array(values: Sequence[float] | np.ndarray | torch.Tensor) -> np.ndarray:
     if isinstance(values, torch.Tensor):
         values = values.detach().cpu().numpy()
     return np.asarray(values, dtype=np.float64).reshape(-1)
 
 
-def distance_error_by_range(d_hat: "Sequence[float] | np.ndarray | torch.Tensor",
-                            d: "Sequence[float] | np.ndarray | torch.Tensor") -> dict[str, float]:
+def distance_error_by_range(
+    d_hat: Sequence[float] | np.ndarray | torch.Tensor,
+    d: Sequence[float] | np.ndarray | torch.Tensor,
+) -> dict[str, float]:
     """Mean |d̂ − d|/d in percent for "3-4.9", "5-6.9", "7-10" (metres) and "total"."""
     estimates, truths = _as_array(d_hat), _as_array(d)
     if estimates.shape != truths.shape or truths.size == 0:
-        raise ValueError(f"d_hat and d must be non-empty and of equal length, got {estimates.size} and {truths.size}")
+        raise ValueError(
+            f"d_hat and d must be non-empty and of equal length, got {estimates.size} and {truths.size}"
+        )
     if not np.all(np.isfinite(truths)) or np.any(truths <= 0):
         bad = truths[~np.isfinite(truths) | (truths <= 0)][0]
         raise ValueError(f"true distances must be positive and finite, got {bad!r}")

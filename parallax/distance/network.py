@@ -30,7 +30,9 @@ def minmax_gain_offset(values: Tensor, dim: int | None) -> tuple[Tensor, Tensor]
     span = high - low
     magnitude = torch.maximum(high.abs(), low.abs()).clamp_min(1.0)
     constant = span <= 1e-10 * magnitude
-    gain = torch.where(constant, torch.ones_like(span), 2.0 / torch.where(constant, torch.ones_like(span), span))
+    gain = torch.where(
+        constant, torch.ones_like(span), 2.0 / torch.where(constant, torch.ones_like(span), span)
+    )
     offset = torch.where(constant, -(high + low) / 2, -1.0 - gain * low)
     return gain, offset
 
@@ -38,15 +40,23 @@ def minmax_gain_offset(values: Tensor, dim: int | None) -> tuple[Tensor, Tensor]
 class DistanceMLP(nn.Module):
     """Eqs. (13)–(15) with internal mapminmax scaling of inputs and targets."""
 
-    def __init__(self, inputs: int, hidden: int = 30, input_scaling: str = "global",
-                 generator: torch.Generator | None = None, dtype: torch.dtype = torch.float64) -> None:
+    def __init__(
+        self,
+        inputs: int,
+        hidden: int = 30,
+        input_scaling: str = "global",
+        generator: torch.Generator | None = None,
+        dtype: torch.dtype = torch.float64,
+    ) -> None:
         super().__init__()
         if int(inputs) != inputs or inputs < 1:
             raise ValueError(f"inputs must be a positive integer, got {inputs!r}")
         if int(hidden) != hidden or hidden < 1:
             raise ValueError(f"hidden must be a positive integer, got {hidden!r}")
         if input_scaling not in INPUT_SCALINGS:
-            raise ValueError(f"input_scaling must be one of {INPUT_SCALINGS}, got {input_scaling!r}")
+            raise ValueError(
+                f"input_scaling must be one of {INPUT_SCALINGS}, got {input_scaling!r}"
+            )
         self.input_scaling = input_scaling
         self.hidden_layer = nn.Linear(int(inputs), int(hidden), dtype=dtype)
         self.output_layer = nn.Linear(int(hidden), 1, dtype=dtype)
@@ -75,7 +85,9 @@ class DistanceMLP(nn.Module):
             return 2 * torch.rand(*shape, generator=generator, dtype=dtype) - 1
 
         weight = uniform(hidden, inputs)
-        weight = beta * weight / torch.linalg.vector_norm(weight, dim=1, keepdim=True).clamp_min(1e-12)
+        weight = (
+            beta * weight / torch.linalg.vector_norm(weight, dim=1, keepdim=True).clamp_min(1e-12)
+        )
         with torch.no_grad():
             self.hidden_layer.weight.copy_(2 * weight)
             self.hidden_layer.bias.copy_(2 * beta * uniform(hidden))

@@ -49,7 +49,7 @@ class QueueMemory:
         """S of eq. (9), (r, fill): column k−1 is s_k."""
         return self.inputs.T
 
-    def to(self, device: "torch.device | str") -> "QueueMemory":
+    def to(self, device: torch.device | str) -> QueueMemory:
         """Moves the stored vectors and targets to ``device`` (in place; returns self)."""
         self._inputs, self._targets = self._inputs.to(device), self._targets.to(device)
         return self
@@ -69,14 +69,20 @@ class QueueMemory:
         self._fill = kept + 1
 
     def state_dict(self) -> dict[str, object]:
-        return {"inputs": self._inputs.clone(), "targets": self._targets.clone(), "fill": self._fill}
+        return {
+            "inputs": self._inputs.clone(),
+            "targets": self._targets.clone(),
+            "fill": self._fill,
+        }
 
     def load_state_dict(self, state: dict[str, object]) -> None:
         inputs = torch.as_tensor(state["inputs"], dtype=self._inputs.dtype)
         targets = torch.as_tensor(state["targets"], dtype=self._targets.dtype)
         fill = int(state["fill"])  # type: ignore[arg-type]
         if inputs.shape != self._inputs.shape or targets.shape != self._targets.shape:
-            raise ValueError(f"queue state has shape {tuple(inputs.shape)}, expected {tuple(self._inputs.shape)}")
+            raise ValueError(
+                f"queue state has shape {tuple(inputs.shape)}, expected {tuple(self._inputs.shape)}"
+            )
         if not 0 <= fill <= self.capacity:
             raise ValueError(f"queue fill must be in [0, {self.capacity}], got {fill}")
         self._inputs.copy_(inputs)

@@ -7,7 +7,7 @@ in degrees stands in for the imperfect policy (the paper's eye-movement MAE is â
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -18,8 +18,12 @@ PAPER_DISTANCES_M = np.round(np.arange(30, 101) / 10.0, 1)
 PAPER_LATERAL_POSITIONS_M = [round(cm / 100.0, 2) for cm in range(5, 21)]
 
 
-def parallax_pans(lateral_positions_m: Sequence[float], distances_m: np.ndarray,
-                  noise_deg: "float | Sequence[float] | np.ndarray", rng: np.random.Generator) -> np.ndarray:
+def parallax_pans(
+    lateral_positions_m: Sequence[float],
+    distances_m: np.ndarray,
+    noise_deg: float | Sequence[float] | np.ndarray,
+    rng: np.random.Generator,
+) -> np.ndarray:
     """(n, r) pans in degrees: atan(l_p/d) plus N(0, noise_deg) per entry.
 
     ``noise_deg`` is one standard deviation for every position or one per position (r values).
@@ -32,8 +36,12 @@ def parallax_pans(lateral_positions_m: Sequence[float], distances_m: np.ndarray,
     return pans + rng.normal(0.0, noise_deg, size=pans.shape)
 
 
-def paper_regression(samples: int, rng: np.random.Generator, noise_deg: float = 0.05,
-                     lateral_positions_m: Sequence[float] = PAPER_LATERAL_POSITIONS_M) -> tuple[np.ndarray, np.ndarray]:
+def paper_regression(
+    samples: int,
+    rng: np.random.Generator,
+    noise_deg: float = 0.05,
+    lateral_positions_m: Sequence[float] = PAPER_LATERAL_POSITIONS_M,
+) -> tuple[np.ndarray, np.ndarray]:
     """``samples`` (s, d) pairs with d drawn uniformly from the paper's grid."""
     distances = rng.choice(PAPER_DISTANCES_M, size=samples)
     return parallax_pans(lateral_positions_m, distances, noise_deg, rng), distances

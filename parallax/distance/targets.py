@@ -9,14 +9,14 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from typing import Callable
+from collections.abc import Callable
 
 from torch import Tensor
 
-TARGET_SOURCES: dict[str, type["TargetSource"]] = {}
+TARGET_SOURCES: dict[str, type[TargetSource]] = {}
 
 
-def register_target_source(name: str) -> Callable[[type["TargetSource"]], type["TargetSource"]]:
+def register_target_source(name: str) -> Callable[[type[TargetSource]], type[TargetSource]]:
     """Class decorator adding a target source to ``TARGET_SOURCES`` under ``name``."""
 
     def register(cls: type[TargetSource]) -> type[TargetSource]:
@@ -49,11 +49,13 @@ class GroundTruthTargets(TargetSource):
     def __call__(self, s: Tensor, distance_m: float) -> float:
         distance_m = float(distance_m)
         if not math.isfinite(distance_m) or distance_m <= 0:
-            raise ValueError(f"ground-truth distance must be a positive finite number of metres, got {distance_m!r}")
+            raise ValueError(
+                f"ground-truth distance must be a positive finite number of metres, got {distance_m!r}"
+            )
         return distance_m
 
 
-def make_target_source(spec: "str | TargetSource") -> TargetSource:
+def make_target_source(spec: str | TargetSource) -> TargetSource:
     """A registered source by name, or ``spec`` itself if it already is a source."""
     if isinstance(spec, TargetSource):
         return spec

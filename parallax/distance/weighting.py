@@ -14,21 +14,36 @@ default 2.5 px makes 15 cm sensitive (exact score 531·0.15/3 = 26.55, Table 1's
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
-from parallax.geometry import FOCAL_LENGTH_PX, NEAREST_DISTANCE_M, disparity_score, effective_patch_size
+from parallax.geometry import (
+    FOCAL_LENGTH_PX,
+    NEAREST_DISTANCE_M,
+    disparity_score,
+    effective_patch_size,
+)
 
 CM_PER_M = 100.0
 
 
-def sensitive_positions(lateral_positions_m: Sequence[float], *, patch: int = 10, subsample: float = 8.0,
-                        nearest_distance: float = NEAREST_DISTANCE_M, tolerance: float = 2.5,
-                        focal_px: float = FOCAL_LENGTH_PX) -> list[bool]:
+def sensitive_positions(
+    lateral_positions_m: Sequence[float],
+    *,
+    patch: int = 10,
+    subsample: float = 8.0,
+    nearest_distance: float = NEAREST_DISTANCE_M,
+    tolerance: float = 2.5,
+    focal_px: float = FOCAL_LENGTH_PX,
+) -> list[bool]:
     """For each l_k (metres, in the order of L): is it sensitive (eq. 10 and the text after)?"""
     if not math.isfinite(tolerance) or tolerance < 0:
-        raise ValueError(f"sensitivity tolerance must be a finite number of pixels ≥ 0, got {tolerance!r}")
+        raise ValueError(
+            f"sensitivity tolerance must be a finite number of pixels ≥ 0, got {tolerance!r}"
+        )
     if patch <= 0 or subsample <= 0:
-        raise ValueError(f"patch and subsample must be positive, got patch={patch!r}, subsample={subsample!r}")
+        raise ValueError(
+            f"patch and subsample must be positive, got patch={patch!r}, subsample={subsample!r}"
+        )
     threshold = effective_patch_size(patch, subsample) - tolerance
     sensitive: list[bool] = []
     for lateral in lateral_positions_m:
@@ -37,10 +52,14 @@ def sensitive_positions(lateral_positions_m: Sequence[float], *, patch: int = 10
     return sensitive
 
 
-def position_weights(lateral_positions_m: Sequence[float], sensitive: Sequence[bool], y: float) -> list[float]:
+def position_weights(
+    lateral_positions_m: Sequence[float], sensitive: Sequence[bool], y: float
+) -> list[float]:
     """w_k of eq. (12): 1/((1 + l_r − l_k)·y) with l in cm for sensitive positions, else 1."""
     if len(sensitive) != len(lateral_positions_m):
-        raise ValueError(f"got {len(sensitive)} sensitivity flags for {len(lateral_positions_m)} positions")
+        raise ValueError(
+            f"got {len(sensitive)} sensitivity flags for {len(lateral_positions_m)} positions"
+        )
     if not math.isfinite(y) or y <= 0:
         raise ValueError(f"weighting hyper-parameter y must be positive and finite, got {y!r}")
     last_cm = float(lateral_positions_m[-1]) * CM_PER_M
@@ -51,7 +70,9 @@ def position_weights(lateral_positions_m: Sequence[float], sensitive: Sequence[b
             continue
         denominator = (1.0 + last_cm - float(lateral) * CM_PER_M) * y
         if not denominator > 0:
-            raise ValueError(f"weight of lateral position {lateral!r} m is undefined: 1 + l_r − l_k "
-                             f"= {denominator / y!r} cm must be positive (is L in increasing order?)")
+            raise ValueError(
+                f"weight of lateral position {lateral!r} m is undefined: 1 + l_r − l_k "
+                f"= {denominator / y!r} cm must be positive (is L in increasing order?)"
+            )
         weights.append(1.0 / denominator)
     return weights

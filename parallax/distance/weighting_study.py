@@ -32,9 +32,9 @@ import json
 import math
 import statistics
 import sys
+from collections.abc import Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 import torch
@@ -80,15 +80,21 @@ class StudySettings:
             if int(value) != value or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         if self.stream < self.queue:
-            raise ValueError(f"stream ({self.stream!r}) must be at least the queue size ({self.queue!r}): "
-                             "the learner fits only once its queue is full")
+            raise ValueError(
+                f"stream ({self.stream!r}) must be at least the queue size ({self.queue!r}): "
+                "the learner fits only once its queue is full"
+            )
         if not math.isfinite(self.weight_decay) or self.weight_decay < 0:
             raise ValueError(f"weight_decay must be a finite number ≥ 0, got {self.weight_decay!r}")
 
 
-def noisy_pans(pattern: NoisePattern, distances_m: np.ndarray, sensitive: Sequence[bool],
-               rng: np.random.Generator,
-               lateral_positions_m: Sequence[float] = PAPER_LATERAL_POSITIONS_M) -> np.ndarray:
+def noisy_pans(
+    pattern: NoisePattern,
+    distances_m: np.ndarray,
+    sensitive: Sequence[bool],
+    rng: np.random.Generator,
+    lateral_positions_m: Sequence[float] = PAPER_LATERAL_POSITIONS_M,
+) -> np.ndarray:
     """(n, r) pans in degrees: the parallax angle plus the pattern's noise."""
     flags = np.asarray(sensitive, dtype=bool)
     sigma = np.where(flags, pattern.sensitive_sigma_deg, pattern.sigma_deg)
@@ -99,12 +105,18 @@ def noisy_pans(pattern: NoisePattern, distances_m: np.ndarray, sensitive: Sequen
     return pans
 
 
-def learner_error(pattern: NoisePattern, y: float | None, seed: int,
-                  settings: StudySettings = StudySettings()) -> float:
+def learner_error(
+    pattern: NoisePattern, y: float | None, seed: int, settings: StudySettings = StudySettings()
+) -> float:
     """Mean relative distance error (%) of one learner; ``y`` None: without weighting."""
-    learner = DistanceLearner(PAPER_LATERAL_POSITIONS_M, queue_size=settings.queue, weighting=y is not None,
-                              y=1.0 if y is None else float(y), seed=int(seed),
-                              lm={"weight_decay": settings.weight_decay})
+    learner = DistanceLearner(
+        PAPER_LATERAL_POSITIONS_M,
+        queue_size=settings.queue,
+        weighting=y is not None,
+        y=1.0 if y is None else float(y),
+        seed=int(seed),
+        lm={"weight_decay": settings.weight_decay},
+    )
     rng = np.random.default_rng(int(seed))
     distances = rng.choice(PAPER_DISTANCES_M, size=settings.stream)
     pans = noisy_pans(pattern, distances, learner.sensitive, rng)
@@ -118,28 +130,47 @@ def learner_error(pattern: NoisePattern, y: float | None, seed: int,
 
 def _one(job: tuple[str, float | None, int, StudySettings]) -> dict[str, object]:
     name, y, seed, settings = job
-    return {"pattern": name, "weighting": NO_WEIGHTING if y is None else f"y={y:g}", "seed": seed,
-            "error_pct": learner_error(NOISE_PATTERNS[name], y, seed, settings)}
+    return {
+        "pattern": name,
+        "weighting": NO_WEIGHTING if y is None else f"y={y:g}",
+        "seed": seed,
+        "error_pct": learner_error(NOISE_PATTERNS[name], y, seed, settings),
+    }
 
 
-def run_study(patterns: Sequence[str], ys: Sequence[float], seeds: Iterable[int],
-              settings: StudySettings = StudySettings(), jobs: int = 1,
-              progress: bool = False) -> list[dict[str, object]]:
+def run_study(
+    patterns: Sequence[str],
+    ys: Sequence[float],
+    seeds: Iterable[int],
+    settings: StudySettings = StudySettings(),
+    jobs: int = 1,
+    progress: bool = False,
+) -> list[dict[str, object]]:
     """One row per (pattern, weighting, seed): its error in %. Same inputs, same rows."""
     unknown = [name for name in patterns if name not in NOISE_PATTERNS]
     if unknown:
-        raise ValueError(f"unknown noise pattern {unknown[0]!r}; choose from {sorted(NOISE_PATTERNS)}")
+        raise ValueError(
+            f"unknown noise pattern {unknown[0]!r}; choose from {sorted(NOISE_PATTERNS)}"
+        )
     bad_y = [y for y in ys if not (math.isfinite(y) and y > 0)]
     if bad_y:
-        raise ValueError(f"weighting hyper-parameter y must be positive and finite, got {bad_y[0]!r}")
+        raise ValueError(
+            f"weighting hyper-parameter y must be positive and finite, got {bad_y[0]!r}"
+        )
     if jobs < 1:
         raise ValueError(f"jobs must be at least 1, got {jobs!r}")
-    work = [(name, y, int(seed), settings) for name in patterns for y in [None, *ys] for seed in seeds]
+    work = [
+        (name, y, int(seed), settings) for name in patterns for y in [None, *ys] for seed in seeds
+    ]
     if jobs == 1:
         return list(tqdm(map(_one, work), total=len(work), disable=not progress, desc="learners"))
     # One torch thread per worker: the jobs already fill the cores, and the fits are small.
-    with ProcessPoolExecutor(max_workers=jobs, initializer=torch.set_num_threads, initargs=(1,)) as pool:
-        return list(tqdm(pool.map(_one, work), total=len(work), disable=not progress, desc="learners"))
+    with ProcessPoolExecutor(
+        max_workers=jobs, initializer=torch.set_num_threads, initargs=(1,)
+    ) as pool:
+        return list(
+            tqdm(pool.map(_one, work), total=len(work), disable=not progress, desc="learners")
+        )
 
 
 def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
@@ -147,59 +178,104 @@ def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
     difference (negative: the weighting helps) and on how many seeds it helps."""
     by_cell: dict[tuple[str, str], dict[int, float]] = {}
     for row in rows:
-        by_cell.setdefault((str(row["pattern"]), str(row["weighting"])), {})[int(row["seed"])] = float(row["error_pct"])
+        by_cell.setdefault((str(row["pattern"]), str(row["weighting"])), {})[int(row["seed"])] = (
+            float(row["error_pct"])
+        )
     summary = []
     for (pattern, weighting), errors in by_cell.items():
         values = list(errors.values())
         baseline = by_cell.get((pattern, NO_WEIGHTING), {})
         paired = [errors[seed] - baseline[seed] for seed in errors if seed in baseline]
-        summary.append({"pattern": pattern, "weighting": weighting, "n": len(values),
-                        "mean_pct": statistics.fmean(values),
-                        "sd_pct": statistics.stdev(values) if len(values) > 1 else math.nan,
-                        "minus_none_pct": statistics.fmean(paired) if paired else math.nan,
-                        "seeds_better_than_none": sum(d < 0 for d in paired)})
+        summary.append(
+            {
+                "pattern": pattern,
+                "weighting": weighting,
+                "n": len(values),
+                "mean_pct": statistics.fmean(values),
+                "sd_pct": statistics.stdev(values) if len(values) > 1 else math.nan,
+                "minus_none_pct": statistics.fmean(paired) if paired else math.nan,
+                "seeds_better_than_none": sum(d < 0 for d in paired),
+            }
+        )
     return summary
 
 
 def markdown(summary: Sequence[dict[str, object]]) -> str:
     """A table: one row per pattern and weighting."""
-    lines = ["| noise pattern | weighting | distance error (mean ± sd over seeds) | against none (paired) "
-             "| seeds where it helps |", "|---|---|---|---|---|"]
+    lines = [
+        "| noise pattern | weighting | distance error (mean ± sd over seeds) | against none (paired) "
+        "| seeds where it helps |",
+        "|---|---|---|---|---|",
+    ]
     for cell in summary:
-        against = "" if cell["weighting"] == NO_WEIGHTING else f"{cell['minus_none_pct']:+.2f} points"
-        helps = "" if cell["weighting"] == NO_WEIGHTING else f"{cell['seeds_better_than_none']} of {cell['n']}"
-        lines.append(f"| {cell['pattern']} | {cell['weighting']} | {cell['mean_pct']:.2f} ± {cell['sd_pct']:.2f} % "
-                     f"| {against} | {helps} |")
+        against = (
+            "" if cell["weighting"] == NO_WEIGHTING else f"{cell['minus_none_pct']:+.2f} points"
+        )
+        helps = (
+            ""
+            if cell["weighting"] == NO_WEIGHTING
+            else f"{cell['seeds_better_than_none']} of {cell['n']}"
+        )
+        lines.append(
+            f"| {cell['pattern']} | {cell['weighting']} | {cell['mean_pct']:.2f} ± {cell['sd_pct']:.2f} % "
+            f"| {against} | {helps} |"
+        )
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m parallax.distance.weighting_study",
-                                     description=__doc__.split("\n\n")[0])
-    parser.add_argument("--patterns", nargs="+", default=list(NOISE_PATTERNS), metavar="NAME",
-                        help=f"noise patterns, from {', '.join(NOISE_PATTERNS)} (default: all)")
-    parser.add_argument("--y", nargs="+", type=float, default=[0.1, 1.0, 5.0], help="weighted learners' y")
-    parser.add_argument("--seeds", type=int, default=4, help="seeds 0…N−1 (data and initialisation)")
-    parser.add_argument("--stream", type=int, default=StudySettings.stream, help="vectors s streamed per learner")
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.distance.weighting_study", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument(
+        "--patterns",
+        nargs="+",
+        default=list(NOISE_PATTERNS),
+        metavar="NAME",
+        help=f"noise patterns, from {', '.join(NOISE_PATTERNS)} (default: all)",
+    )
+    parser.add_argument(
+        "--y", nargs="+", type=float, default=[0.1, 1.0, 5.0], help="weighted learners' y"
+    )
+    parser.add_argument(
+        "--seeds", type=int, default=4, help="seeds 0…N−1 (data and initialisation)"
+    )
+    parser.add_argument(
+        "--stream", type=int, default=StudySettings.stream, help="vectors s streamed per learner"
+    )
     parser.add_argument("--queue", type=int, default=StudySettings.queue, help="queue size c")
-    parser.add_argument("--weight-decay", type=float, default=StudySettings.weight_decay,
-                        help="distance.lm.weight_decay")
+    parser.add_argument(
+        "--weight-decay",
+        type=float,
+        default=StudySettings.weight_decay,
+        help="distance.lm.weight_decay",
+    )
     parser.add_argument("--jobs", type=int, default=1, help="learners fitted at once (processes)")
     parser.add_argument("--json", default=None, help="write the rows, summary and settings here")
     args = parser.parse_args(argv)
     try:
         if args.seeds < 1:
             raise ValueError(f"--seeds must be at least 1, got {args.seeds!r}")
-        settings = StudySettings(stream=args.stream, queue=args.queue, weight_decay=args.weight_decay)
-        rows = run_study(args.patterns, args.y, range(args.seeds), settings, jobs=args.jobs, progress=True)
+        settings = StudySettings(
+            stream=args.stream, queue=args.queue, weight_decay=args.weight_decay
+        )
+        rows = run_study(
+            args.patterns, args.y, range(args.seeds), settings, jobs=args.jobs, progress=True
+        )
     except ValueError as error:
         print(f"weighting_study: {error}", file=sys.stderr)
         return 2
     summary = summarise(rows)
     print(markdown(summary))
     if args.json:
-        payload = {"settings": asdict(settings), "patterns": {n: asdict(NOISE_PATTERNS[n]) for n in args.patterns},
-                   "y": args.y, "seeds": args.seeds, "rows": rows, "summary": summary}
+        payload = {
+            "settings": asdict(settings),
+            "patterns": {n: asdict(NOISE_PATTERNS[n]) for n in args.patterns},
+            "y": args.y,
+            "seeds": args.seeds,
+            "rows": rows,
+            "summary": summary,
+        }
         with open(args.json, "w", encoding="utf-8") as handle:
             json.dump(payload, handle, indent=1)
     return 0

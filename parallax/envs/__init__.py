@@ -16,11 +16,27 @@ from parallax.envs.backend import default_to_egl, import_mujoco
 default_to_egl()
 import_mujoco()  # first, so that a broken GL backend gives one clear error
 
-from parallax.envs.rendering import gl_thread  # noqa: E402
 from parallax.envs.hoap3 import PAN_LIMIT_DEG, Physics, eye_fovy_deg  # noqa: E402
+from parallax.envs.rendering import gl_thread  # noqa: E402
 from parallax.envs.stimuli import StimulusSet, load_stimuli  # noqa: E402
-from parallax.envs.task import (ACTION_SET_DEG, LateralPursuitTask, PursuitEnvironment,  # noqa: E402
-                                distance_grid, load)
+from parallax.envs.task import (  # noqa: E402
+    ACTION_SET_DEG,
+    LateralPursuitTask,
+    PursuitEnvironment,
+    distance_grid,
+    load,
+)
 
-__all__ = ["load", "Physics", "LateralPursuitTask", "PursuitEnvironment", "StimulusSet",
-           "load_stimuli", "distance_grid", "eye_fovy_deg", "gl_thread", "ACTION_SET_DEG", "PAN_LIMIT_DEG"]
+__all__ = [
+    "load",
+    "Physics",
+    "LateralPursuitTask",
+    "PursuitEnvironment",
+    "StimulusSet",
+    "load_stimuli",
+    "distance_grid",
+    "eye_fovy_deg",
+    "gl_thread",
+    "ACTION_SET_DEG",
+    "PAN_LIMIT_DEG",
+]

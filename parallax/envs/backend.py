@@ -38,21 +38,27 @@ def import_mujoco() -> ModuleType:
     try:
         return importlib.import_module("mujoco")
     except (ImportError, OSError, AttributeError, RuntimeError) as error:
-        raise RuntimeError(f"MUJOCO_GL={gl_backend()}: MuJoCo could not load this OpenGL backend "
-                           f"({type(error).__name__}: {error}); {INSTALL_HINT}") from error
+        raise RuntimeError(
+            f"MUJOCO_GL={gl_backend()}: MuJoCo could not load this OpenGL backend "
+            f"({type(error).__name__}: {error}); {INSTALL_HINT}"
+        ) from error
 
 
 def gl_context_class() -> Any:
     """The ``GLContext`` class of the chosen backend."""
     backend = gl_backend()
     if backend not in _BACKEND_MODULES:
-        raise RuntimeError(f"MUJOCO_GL={backend!r} is not a backend parallax renders with; "
-                           f"use one of {sorted(_BACKEND_MODULES)}")
+        raise RuntimeError(
+            f"MUJOCO_GL={backend!r} is not a backend parallax renders with; "
+            f"use one of {sorted(_BACKEND_MODULES)}"
+        )
     try:
         return importlib.import_module(_BACKEND_MODULES[backend]).GLContext
     except (ImportError, OSError, AttributeError) as error:
-        raise RuntimeError(f"MUJOCO_GL={backend}: the OpenGL backend could not be loaded "
-                           f"({type(error).__name__}: {error}); {INSTALL_HINT}") from error
+        raise RuntimeError(
+            f"MUJOCO_GL={backend}: the OpenGL backend could not be loaded "
+            f"({type(error).__name__}: {error}); {INSTALL_HINT}"
+        ) from error
 
 
 def open_gl_context(width: int, height: int) -> Any:
@@ -62,6 +68,8 @@ def open_gl_context(width: int, height: int) -> Any:
         context = context_class(width, height)
         context.make_current()
     except Exception as error:  # the backends raise assorted GL/ctypes errors; name them all
-        raise RuntimeError(f"MUJOCO_GL={gl_backend()}: could not open an OpenGL context "
-                           f"({type(error).__name__}: {error}); {INSTALL_HINT}") from error
+        raise RuntimeError(
+            f"MUJOCO_GL={gl_backend()}: could not open an OpenGL context "
+            f"({type(error).__name__}: {error}); {INSTALL_HINT}"
+        ) from error
     return context

@@ -39,13 +39,18 @@ def run(repeats: int = 50, image_size: int = 256) -> dict[str, float]:
 
     blurred = parallax.envs.load(seed=0, blur_sigma=2.0, **options)
     blurred.reset()
-    results = interleaved_medians_ms({
-        "render_left_eye_ms": physics.render_left_eye,
-        "env_step_ms": step,
-        "target_pan_ms": physics.target_pan_deg,
-        "render_left_eye_blur2_ms": blurred.physics.render_left_eye,
-    }, repeats)
-    results.update(interleaved_medians_ms({"env_reset_ms": env.reset}, max(5, repeats // 5), warmup=2))
+    results = interleaved_medians_ms(
+        {
+            "render_left_eye_ms": physics.render_left_eye,
+            "env_step_ms": step,
+            "target_pan_ms": physics.target_pan_deg,
+            "render_left_eye_blur2_ms": blurred.physics.render_left_eye,
+        },
+        repeats,
+    )
+    results.update(
+        interleaved_medians_ms({"env_reset_ms": env.reset}, max(5, repeats // 5), warmup=2)
+    )
     blurred.close()
 
     extra, before = [], _resident_mb()

@@ -51,8 +51,14 @@ def views_around_target(env, texture: int, distance: float, lateral: float, offs
     return reference, target, frames()
 
 
-def best_match_offsets(distance: float, lateral: float, textures: int, span_deg: float = 1.0,
-                       step_deg: float = 0.05, seed: int = 0) -> dict[str, list[float]]:
+def best_match_offsets(
+    distance: float,
+    lateral: float,
+    textures: int,
+    span_deg: float = 1.0,
+    step_deg: float = 0.05,
+    seed: int = 0,
+) -> dict[str, list[float]]:
     """scale → per texture, argmin over pans of MSE(window(I(pan)), window(I0)) minus α*, degrees."""
     env = parallax.envs.load(seed=seed, lateral_positions=[lateral], trial_length=30)
     specs = scale_specs()
@@ -73,16 +79,25 @@ def best_match_offsets(distance: float, lateral: float, textures: int, span_deg:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m parallax.envs.best_match", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.envs.best_match", description=__doc__.split("\n\n")[0]
+    )
     parser.add_argument("--distances", type=float, nargs="+", default=[3.0, 6.5, 10.0])
-    parser.add_argument("--lateral", type=float, default=0.2, help="lateral position, metres (default 0.2)")
+    parser.add_argument(
+        "--lateral", type=float, default=0.2, help="lateral position, metres (default 0.2)"
+    )
     parser.add_argument("--textures", type=int, default=6)
     args = parser.parse_args(argv)
     print(f"best-match pan − α* (deg) at L = {args.lateral * 100:.0f} cm, per texture (step 0.05°)")
     for d in args.distances:
         offsets = best_match_offsets(d, args.lateral, args.textures)
-        print(f"d = {d:5.2f} m  " + "  ".join(
-            f"{name}: {np.round(v, 2).tolist()} (mean |·| {np.mean(np.abs(v)):.3f})" for name, v in offsets.items()))
+        print(
+            f"d = {d:5.2f} m  "
+            + "  ".join(
+                f"{name}: {np.round(v, 2).tolist()} (mean |·| {np.mean(np.abs(v)):.3f})"
+                for name, v in offsets.items()
+            )
+        )
 
 
 if __name__ == "__main__":

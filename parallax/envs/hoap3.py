@@ -47,7 +47,11 @@ EYE_HEIGHT_M = 0.607
 #: 20 cm lateral move at pan 0 (150/2 + 531·0.2/10 px ≈ 86 px from the centre; 1.65 m ≈ 88 px).
 PANEL_SIDE_M = 3.3
 #: Camera axes for the perturbation rotation, in the camera's frame (it looks along its −z).
-ROTATION_AXES = {"optical": (0.0, 0.0, -1.0), "horizontal": (1.0, 0.0, 0.0), "vertical": (0.0, 1.0, 0.0)}
+ROTATION_AXES = {
+    "optical": (0.0, 0.0, -1.0),
+    "horizontal": (1.0, 0.0, 0.0),
+    "vertical": (0.0, 1.0, 0.0),
+}
 #: Geom group of the marker disc at the panel centre (hidden from the eye unless asked for).
 MARKER_GROUP = 4
 #: Geom groups the side view adds to the eye's: the robot's body and the floor.
@@ -93,8 +97,10 @@ def camera_axis(rotation_axis: str | tuple[float, float, float]) -> tuple[float,
     """A perturbation rotation axis by name (optical, horizontal, vertical) or as a camera-frame vector."""
     if isinstance(rotation_axis, str):
         if rotation_axis not in ROTATION_AXES:
-            raise ValueError(f"rotation_axis={rotation_axis!r}: choose one of {sorted(ROTATION_AXES)} "
-                             "or give a 3-vector in the camera frame")
+            raise ValueError(
+                f"rotation_axis={rotation_axis!r}: choose one of {sorted(ROTATION_AXES)} "
+                "or give a 3-vector in the camera frame"
+            )
         return ROTATION_AXES[rotation_axis]
     vector = np.asarray(rotation_axis, dtype=np.float64).reshape(-1)
     if vector.shape != (3,) or not np.all(np.isfinite(vector)) or np.linalg.norm(vector) == 0:
@@ -103,7 +109,9 @@ def camera_axis(rotation_axis: str | tuple[float, float, float]) -> tuple[float,
 
 
 def check_distance(distance_m: float) -> float:
-    if isinstance(distance_m, bool) or not isinstance(distance_m, (int, float, np.integer, np.floating)):
+    if isinstance(distance_m, bool) or not isinstance(
+        distance_m, (int, float, np.integer, np.floating)
+    ):
         raise ValueError(f"distance must be a positive finite number of metres, got {distance_m!r}")
     if not math.isfinite(distance_m) or distance_m <= 0:
         raise ValueError(f"distance must be a positive finite number of metres, got {distance_m!r}")
@@ -111,8 +119,11 @@ def check_distance(distance_m: float) -> float:
 
 
 def _check_finite(name: str, value: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(value):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not math.isfinite(value)
+    ):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     return float(value)
 
@@ -122,11 +133,21 @@ class Physics(dm_mujoco.Physics):
 
     # --- construction ----------------------------------------------------------------------
     @classmethod
-    def create(cls, stimuli: StimulusSet, image_size: int = 256, max_distance_m: float = 10.0) -> "Physics":
+    def create(
+        cls, stimuli: StimulusSet, image_size: int = 256, max_distance_m: float = 10.0
+    ) -> Physics:
         """Compile the world for ``image_size`` eye images and attach the (shared) stimulus set."""
-        if isinstance(image_size, bool) or not isinstance(image_size, (int, np.integer)) or not 16 <= image_size <= 2048:
-            raise ValueError(f"image_size={image_size!r}: expected an integer number of pixels in [16, 2048]")
-        physics = cls.from_xml_string(model_xml(int(image_size), stimuli.resolution, max_distance_m))
+        if (
+            isinstance(image_size, bool)
+            or not isinstance(image_size, (int, np.integer))
+            or not 16 <= image_size <= 2048
+        ):
+            raise ValueError(
+                f"image_size={image_size!r}: expected an integer number of pixels in [16, 2048]"
+            )
+        physics = cls.from_xml_string(
+            model_xml(int(image_size), stimuli.resolution, max_distance_m)
+        )
         physics._setup(stimuli, int(image_size))
         return physics
 
@@ -202,14 +223,23 @@ class Physics(dm_mujoco.Physics):
     def set_stimulus(self, texture_index: int, distance_m: float) -> None:
         """Show texture ``texture_index`` on the panel, ``distance_m`` metres ahead of the eye at l0."""
         count = self._stimuli.count
-        if isinstance(texture_index, bool) or not isinstance(texture_index, (int, np.integer)) \
-                or not 0 <= texture_index < count:
-            raise ValueError(f"texture index {texture_index!r} is out of range: {count} textures (0..{count - 1})")
+        if (
+            isinstance(texture_index, bool)
+            or not isinstance(texture_index, (int, np.integer))
+            or not 0 <= texture_index < count
+        ):
+            raise ValueError(
+                f"texture index {texture_index!r} is out of range: {count} textures (0..{count - 1})"
+            )
         distance_m = check_distance(distance_m)
         if int(texture_index) != self._texture_index:
             self._write_texture("stimulus", self._stimuli.textures[int(texture_index)])
             self._texture_index = int(texture_index)
-        self.data.mocap_pos[self._stimulus_mocap] = (EYE_FORWARD_M + distance_m, EYE_LEFT_M, EYE_HEIGHT_M)
+        self.data.mocap_pos[self._stimulus_mocap] = (
+            EYE_FORWARD_M + distance_m,
+            EYE_LEFT_M,
+            EYE_HEIGHT_M,
+        )
         self._distance = distance_m
         self.forward()
 
@@ -219,10 +249,12 @@ class Physics(dm_mujoco.Physics):
         height, width = int(model.tex_height[texture_id]), int(model.tex_width[texture_id])
         channels = int(model.tex_nchannel[texture_id])
         if rgb.shape != (height, width, 3) or channels != 3:
-            raise ValueError(f"texture {name!r} expects {height}x{width}x{channels} pixels, got {rgb.shape}")
+            raise ValueError(
+                f"texture {name!r} expects {height}x{width}x{channels} pixels, got {rgb.shape}"
+            )
         start = int(model.tex_adr[texture_id])
         # Row 0 is the top of the panel as the robot sees it (the panel's xyaxes make it so).
-        model.tex_data[start:start + rgb.size] = np.ascontiguousarray(rgb).reshape(-1)
+        model.tex_data[start : start + rgb.size] = np.ascontiguousarray(rgb).reshape(-1)
         if self._renderer is not None:
             self._renderer.upload_texture(texture_id)
 
@@ -249,7 +281,9 @@ class Physics(dm_mujoco.Physics):
                 break
         return math.degrees(pan)
 
-    def _horizontal_bearing(self, model: mujoco.MjModel, scratch: mujoco.MjData, pan_rad: float) -> float:
+    def _horizontal_bearing(
+        self, model: mujoco.MjModel, scratch: mujoco.MjData, pan_rad: float
+    ) -> float:
         """Angle of the panel centre from the camera's vertical mid-plane, at pan ``pan_rad``."""
         scratch.qpos[self._pan_qpos] = pan_rad
         mujoco.mj_kinematics(model, scratch)
@@ -269,8 +303,12 @@ class Physics(dm_mujoco.Physics):
         return self.data.geom_xpos[self._panel_geom].copy()
 
     # --- perturbations (§5) --------------------------------------------------------------------
-    def set_perturbation(self, camera_rotation_deg: float | None = None, blur_sigma: float | None = None,
-                         rotation_axis: str | tuple[float, float, float] | None = None) -> None:
+    def set_perturbation(
+        self,
+        camera_rotation_deg: float | None = None,
+        blur_sigma: float | None = None,
+        rotation_axis: str | tuple[float, float, float] | None = None,
+    ) -> None:
         """Rotate the left camera and/or blur captured images, at once and without recompiling.
 
         The rotation changes ``model.cam_quat``; a positive angle about the optical axis turns the
@@ -287,14 +325,19 @@ class Physics(dm_mujoco.Physics):
         if camera_rotation_deg is not None:
             self._rotation_deg = _check_finite("camera_rotation_deg", camera_rotation_deg)
         quat = np.zeros(4)
-        mujoco.mju_mulQuat(quat, self._left_eye_quat, _rotation_quat(self._rotation_axis, self._rotation_deg))
+        mujoco.mju_mulQuat(
+            quat, self._left_eye_quat, _rotation_quat(self._rotation_axis, self._rotation_deg)
+        )
         self.model.ptr.cam_quat[self._left_eye] = quat
         self.forward()
 
     @property
     def perturbation(self) -> dict[str, object]:
-        return {"camera_rotation_deg": self._rotation_deg, "rotation_axis": self._rotation_axis,
-                "blur_sigma": self._blur_sigma}
+        return {
+            "camera_rotation_deg": self._rotation_deg,
+            "rotation_axis": self._rotation_axis,
+            "blur_sigma": self._blur_sigma,
+        }
 
     # --- rendering -----------------------------------------------------------------------------
     @property
@@ -306,18 +349,30 @@ class Physics(dm_mujoco.Physics):
     def render_left_eye(self, show_marker: bool = False) -> np.ndarray:
         """The left-eye image I(t): (S, S, 3) uint8, perturbation blur applied."""
         option = rendering.eye_scene_option((MARKER_GROUP,)) if show_marker else self._eye_option
-        image = self.renderer.render(self.data.ptr, self._left_eye_camera, self._image_size,
-                                     self._image_size, option)
+        image = self.renderer.render(
+            self.data.ptr, self._left_eye_camera, self._image_size, self._image_size, option
+        )
         if self._blur_sigma > 0:
-            image = cv2.GaussianBlur(image, (0, 0), sigmaX=self._blur_sigma, sigmaY=self._blur_sigma,
-                                     borderType=cv2.BORDER_REFLECT_101)
+            image = cv2.GaussianBlur(
+                image,
+                (0, 0),
+                sigmaX=self._blur_sigma,
+                sigmaY=self._blur_sigma,
+                borderType=cv2.BORDER_REFLECT_101,
+            )
         return image
 
-    def render_view(self, camera: mujoco.MjvCamera, width: int, height: int,
-                    groups: tuple[int, ...] = (ROBOT_GROUP, FLOOR_GROUP)) -> np.ndarray:
+    def render_view(
+        self,
+        camera: mujoco.MjvCamera,
+        width: int,
+        height: int,
+        groups: tuple[int, ...] = (ROBOT_GROUP, FLOOR_GROUP),
+    ) -> np.ndarray:
         """Any camera (e.g. a free side view) with the eye's groups plus ``groups`` and the sky."""
-        return self.renderer.render(self.data.ptr, camera, width, height, rendering.eye_scene_option(groups),
-                                    skybox=True)
+        return self.renderer.render(
+            self.data.ptr, camera, width, height, rendering.eye_scene_option(groups), skybox=True
+        )
 
     def close_renderer(self) -> None:
         """Free the OpenGL resources now (they are re-created on the next render)."""

@@ -30,7 +30,9 @@ SIDE_SIZE = (800, 480)
 def _label(image: np.ndarray, text: str, strip: int = 22) -> np.ndarray:
     """The image with a white caption strip above it."""
     band = np.full((strip, image.shape[1], 3), 255, dtype=np.uint8)
-    cv2.putText(band, text, (4, strip - 7), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.putText(
+        band, text, (4, strip - 7), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 1, cv2.LINE_AA
+    )
     return np.concatenate([band, image], axis=0)
 
 
@@ -45,15 +47,25 @@ def side_camera(distance_m: float, lateral_m: float) -> mujoco.MjvCamera:
     return camera
 
 
-def render_pictures(distance_m: float = 3.0, lateral_m: float = 0.1, seed: int = 0,
-                    texture_index: int | None = None, image_size: int = 256) -> dict[str, np.ndarray]:
+def render_pictures(
+    distance_m: float = 3.0,
+    lateral_m: float = 0.1,
+    seed: int = 0,
+    texture_index: int | None = None,
+    image_size: int = 256,
+) -> dict[str, np.ndarray]:
     """The side view and the left-eye strip as RGB arrays (nothing written)."""
     import parallax.envs
 
     if not math.isfinite(lateral_m):
         raise ValueError(f"--lateral must be a finite number of metres, got {lateral_m!r}")
-    env = parallax.envs.load(seed=seed, lateral_positions=[lateral_m], trial_length=2,
-                             distances=[distance_m], image_size=image_size)
+    env = parallax.envs.load(
+        seed=seed,
+        lateral_positions=[lateral_m],
+        trial_length=2,
+        distances=[distance_m],
+        image_size=image_size,
+    )
     try:
         if texture_index is not None:
             env.task.set_next_stimulus(texture_index=texture_index)
@@ -64,15 +76,20 @@ def render_pictures(distance_m: float = 3.0, lateral_m: float = 0.1, seed: int =
         fixating = physics.render_left_eye()
         side = physics.render_view(side_camera(distance_m, lateral_m), *SIDE_SIZE)
         disparity = disparity_score(lateral_m, distance_m)
-        eye = np.concatenate([
-            _label(first["reference"], "I0 (reference): l = 0, pan 0"),
-            np.full((first["image"].shape[0] + 22, 6, 3), 255, np.uint8),
-            _label(first["image"], f"l = {lateral_m * 100:g} cm, pan 0 ({disparity:.1f} px)"),
-            np.full((first["image"].shape[0] + 22, 6, 3), 255, np.uint8),
-            _label(fixating, f"l = {lateral_m * 100:g} cm, pan = target {target:.3f} deg"),
-        ], axis=1)
-        caption = (f"d = {distance_m:g} m, l = {lateral_m * 100:g} cm, texture "
-                   f"{int(first['texture_index'])}: {physics.stimuli.names[int(first['texture_index'])]}")
+        eye = np.concatenate(
+            [
+                _label(first["reference"], "I0 (reference): l = 0, pan 0"),
+                np.full((first["image"].shape[0] + 22, 6, 3), 255, np.uint8),
+                _label(first["image"], f"l = {lateral_m * 100:g} cm, pan 0 ({disparity:.1f} px)"),
+                np.full((first["image"].shape[0] + 22, 6, 3), 255, np.uint8),
+                _label(fixating, f"l = {lateral_m * 100:g} cm, pan = target {target:.3f} deg"),
+            ],
+            axis=1,
+        )
+        caption = (
+            f"d = {distance_m:g} m, l = {lateral_m * 100:g} cm, texture "
+            f"{int(first['texture_index'])}: {physics.stimuli.names[int(first['texture_index'])]}"
+        )
         return {"scene_side.png": _label(side, caption), "scene_left_eye.png": eye}
     finally:
         env.close()
@@ -95,15 +112,29 @@ def write_pictures(out_dir: str | Path, **options) -> list[Path]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="parallax-render", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="docs", help="folder for the PNGs (default: docs)")
-    parser.add_argument("--distance", type=float, default=3.0, help="panel distance d in metres (default 3)")
-    parser.add_argument("--lateral", type=float, default=0.1, help="lateral position l in metres (default 0.1)")
+    parser.add_argument(
+        "--distance", type=float, default=3.0, help="panel distance d in metres (default 3)"
+    )
+    parser.add_argument(
+        "--lateral", type=float, default=0.1, help="lateral position l in metres (default 0.1)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of the texture draw (default 0)")
-    parser.add_argument("--texture", type=int, default=None, help="texture index (default: drawn from --seed)")
-    parser.add_argument("--image-size", type=int, default=256, help="eye image size in pixels (default 256)")
+    parser.add_argument(
+        "--texture", type=int, default=None, help="texture index (default: drawn from --seed)"
+    )
+    parser.add_argument(
+        "--image-size", type=int, default=256, help="eye image size in pixels (default 256)"
+    )
     args = parser.parse_args(argv)
     try:
-        paths = write_pictures(args.out, distance_m=args.distance, lateral_m=args.lateral, seed=args.seed,
-                               texture_index=args.texture, image_size=args.image_size)
+        paths = write_pictures(
+            args.out,
+            distance_m=args.distance,
+            lateral_m=args.lateral,
+            seed=args.seed,
+            texture_index=args.texture,
+            image_size=args.image_size,
+        )
     except ValueError as error:
         parser.error(str(error))
     for path in paths:

@@ -23,8 +23,9 @@ import os
 import queue
 import threading
 import weakref
+from collections.abc import Callable
 from concurrent.futures import Future
-from typing import Any, Callable, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -40,7 +41,7 @@ EYE_GEOM_GROUPS = (0, 2)
 #: Nominal size of the shared contexts: each MuJoCo render context has its own offscreen framebuffer.
 _NOMINAL_SIZE = 2048
 
-_LIVE_RENDERERS: "weakref.WeakSet[SceneRenderer]" = weakref.WeakSet()
+_LIVE_RENDERERS: weakref.WeakSet[SceneRenderer] = weakref.WeakSet()
 _shared_context: Any = None
 
 Result = TypeVar("Result")
@@ -50,7 +51,9 @@ class GLThread:
     """The one thread that makes the process's OpenGL calls; jobs run one at a time, in order."""
 
     def __init__(self) -> None:
-        self._jobs: "queue.SimpleQueue[tuple[Future, Callable[..., Any], tuple]]" = queue.SimpleQueue()
+        self._jobs: queue.SimpleQueue[tuple[Future, Callable[..., Any], tuple]] = (
+            queue.SimpleQueue()
+        )
         # A daemon: it must not keep a finished program alive, and it still serves the exit hook
         # below (daemon threads run until the interpreter tears down, after the atexit hooks).
         self._thread = threading.Thread(target=self._serve, name="parallax-gl", daemon=True)
@@ -66,7 +69,7 @@ class GLThread:
     def is_current(self) -> bool:
         return threading.current_thread() is self._thread
 
-    def submit(self, function: Callable[..., Result], *arguments: Any) -> "Future[Result]":
+    def submit(self, function: Callable[..., Result], *arguments: Any) -> Future[Result]:
         """Run ``function(*arguments)`` on this thread after the jobs before it; on this thread
         itself it runs at once (a job may render)."""
         future: Future = Future()
@@ -162,8 +165,10 @@ class SceneRenderer:
         try:
             self._context = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_100.value)
         except mujoco.FatalError as error:  # e.g. glfw without a display "opens" no real context
-            raise RuntimeError(f"MUJOCO_GL={gl_backend()}: MuJoCo found no usable OpenGL context "
-                               f"({error}); {INSTALL_HINT}") from error
+            raise RuntimeError(
+                f"MUJOCO_GL={gl_backend()}: MuJoCo found no usable OpenGL context "
+                f"({error}); {INSTALL_HINT}"
+            ) from error
         self._scene = mujoco.MjvScene(model, maxgeom=max_geom)
         self._perturb = mujoco.MjvPerturb()
         _LIVE_RENDERERS.add(self)
@@ -176,19 +181,42 @@ class SceneRenderer:
         self._make_current()
         mujoco.mjr_uploadTexture(self._model, self._context, texture_id)
 
-    def render(self, data: mujoco.MjData, camera: mujoco.MjvCamera, width: int, height: int,
-               option: mujoco.MjvOption, skybox: bool = False) -> np.ndarray:
+    def render(
+        self,
+        data: mujoco.MjData,
+        camera: mujoco.MjvCamera,
+        width: int,
+        height: int,
+        option: mujoco.MjvOption,
+        skybox: bool = False,
+    ) -> np.ndarray:
         """One RGB frame (height, width, 3) uint8, top row first."""
         if width > self._max_width or height > self._max_height:
-            raise ValueError(f"image {width}x{height} exceeds the offscreen buffer "
-                             f"{self._max_width}x{self._max_height}")
+            raise ValueError(
+                f"image {width}x{height} exceeds the offscreen buffer "
+                f"{self._max_width}x{self._max_height}"
+            )
         return self._gl_thread.call(self._render, data, camera, width, height, option, skybox)
 
-    def _render(self, data: mujoco.MjData, camera: mujoco.MjvCamera, width: int, height: int,
-                option: mujoco.MjvOption, skybox: bool) -> np.ndarray:
+    def _render(
+        self,
+        data: mujoco.MjData,
+        camera: mujoco.MjvCamera,
+        width: int,
+        height: int,
+        option: mujoco.MjvOption,
+        skybox: bool,
+    ) -> np.ndarray:
         self._make_current()
-        mujoco.mjv_updateScene(self._model, data, option, self._perturb, camera,
-                               mujoco.mjtCatBit.mjCAT_ALL, self._scene)
+        mujoco.mjv_updateScene(
+            self._model,
+            data,
+            option,
+            self._perturb,
+            camera,
+            mujoco.mjtCatBit.mjCAT_ALL,
+            self._scene,
+        )
         self._scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = skybox
         viewport = mujoco.MjrRect(0, 0, width, height)
         mujoco.mjr_render(viewport, self._scene, self._context)

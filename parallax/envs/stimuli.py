@@ -15,16 +15,27 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import cv2
 import numpy as np
 
 #: Photographs for training textures (names of ``skimage.data`` loaders; motorcycle = its left view).
-TRAIN_PHOTOS = ("astronaut", "brick", "camera", "chelsea", "coffee", "coins", "grass",
-                "immunohistochemistry", "motorcycle", "rocket")
+TRAIN_PHOTOS = (
+    "astronaut",
+    "brick",
+    "camera",
+    "chelsea",
+    "coffee",
+    "coins",
+    "grass",
+    "immunohistochemistry",
+    "motorcycle",
+    "rocket",
+)
 #: Photographs for held-out textures, disjoint from ``TRAIN_PHOTOS``.
 HELDOUT_PHOTOS = ("gravel", "moon", "page", "text", "retina")
 #: The still background behind the panel; in neither split.
@@ -82,8 +93,16 @@ def normalise_settings(settings: Mapping[str, Any] | None) -> dict[str, Any]:
     unknown = sorted(set(given) - set(SETTING_KEYS))
     if unknown:
         raise ValueError(f"unknown stimuli setting(s) {unknown}; known: {list(SETTING_KEYS)}")
-    options = {"source": "skimage", "split": "train", "count": None, "dir": None,
-               "resolution": 256, "seed": 0, "kind": "dead_leaves", **given}
+    options = {
+        "source": "skimage",
+        "split": "train",
+        "count": None,
+        "dir": None,
+        "resolution": 256,
+        "seed": 0,
+        "kind": "dead_leaves",
+        **given,
+    }
     if options["source"] not in SOURCES:
         raise ValueError(f"stimuli.source={options['source']!r}: choose one of {SOURCES}")
     if options["split"] not in SPLITS:
@@ -91,16 +110,26 @@ def normalise_settings(settings: Mapping[str, Any] | None) -> dict[str, Any]:
     if options["kind"] not in PROCEDURAL_KINDS:
         raise ValueError(f"stimuli.kind={options['kind']!r}: choose one of {PROCEDURAL_KINDS}")
     resolution = options["resolution"]
-    if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) or not 8 <= resolution <= 4096:
-        raise ValueError(f"stimuli.resolution={resolution!r}: expected an integer number of texels in [8, 4096]")
+    if (
+        isinstance(resolution, bool)
+        or not isinstance(resolution, (int, np.integer))
+        or not 8 <= resolution <= 4096
+    ):
+        raise ValueError(
+            f"stimuli.resolution={resolution!r}: expected an integer number of texels in [8, 4096]"
+        )
     count = options["count"]
-    if count is not None and (isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1):
+    if count is not None and (
+        isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1
+    ):
         raise ValueError(f"stimuli.count={count!r}: expected a positive integer or None")
     if options["dir"] is not None and options["source"] != "dir":
         # `stimuli.dir=<folder>` alone switches to the user's images; with procedural it is a mistake.
         if options["source"] == "procedural":
-            raise ValueError(f"stimuli.dir={options['dir']!r} is set but stimuli.source='procedural'; "
-                             "set stimuli.dir=null or stimuli.source=dir")
+            raise ValueError(
+                f"stimuli.dir={options['dir']!r} is set but stimuli.source='procedural'; "
+                "set stimuli.dir=null or stimuli.source=dir"
+            )
         options["source"] = "dir"
     if options["source"] == "dir":
         if not options["dir"]:
@@ -118,7 +147,9 @@ def _cache_key(options: dict[str, Any]) -> tuple:
     if options["source"] == "dir":
         # A folder's contents may change between calls: the listing is part of the key.
         folder = Path(options["dir"]).expanduser().resolve()
-        listing = tuple((p.name, p.stat().st_mtime_ns, p.stat().st_size) for p in _image_candidates(folder))
+        listing = tuple(
+            (p.name, p.stat().st_mtime_ns, p.stat().st_size) for p in _image_candidates(folder)
+        )
         key += (("listing", listing),)
     return key
 
@@ -145,7 +176,11 @@ def photo(name: str) -> np.ndarray:
     if name not in _PHOTO_CACHE:
         import skimage.data
 
-        image = skimage.data.stereo_motorcycle()[0] if name == "motorcycle" else getattr(skimage.data, name)()
+        image = (
+            skimage.data.stereo_motorcycle()[0]
+            if name == "motorcycle"
+            else getattr(skimage.data, name)()
+        )
         image = np.asarray(image)
         if image.ndim == 2:
             image = np.repeat(image[:, :, None], 3, axis=2)
@@ -155,11 +190,15 @@ def photo(name: str) -> np.ndarray:
     return _PHOTO_CACHE[name]
 
 
-def _photo_crops(photos: tuple[str, ...], count: int, resolution: int,
-                 seed: int) -> tuple[list[np.ndarray], list[str]]:
+def _photo_crops(
+    photos: tuple[str, ...], count: int, resolution: int, seed: int
+) -> tuple[list[np.ndarray], list[str]]:
     per_photo = math.ceil(count / len(photos))
     try:
-        crops = [_distinct_crops(name, index, per_photo, resolution, seed) for index, name in enumerate(photos)]
+        crops = [
+            _distinct_crops(name, index, per_photo, resolution, seed)
+            for index, name in enumerate(photos)
+        ]
     except ValueError as error:
         raise ValueError(f"stimuli.count={count}: {error}") from None
     # Interleave photographs, so that a small set still spans all of them.
@@ -167,8 +206,9 @@ def _photo_crops(photos: tuple[str, ...], count: int, resolution: int,
     return [t for t, _ in ordered[:count]], [n for _, n in ordered[:count]]
 
 
-def _distinct_crops(name: str, photo_index: int, wanted: int, resolution: int,
-                    seed: int) -> list[tuple[np.ndarray, str]]:
+def _distinct_crops(
+    name: str, photo_index: int, wanted: int, resolution: int, seed: int
+) -> list[tuple[np.ndarray, str]]:
     image = photo(name)
     gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
     height, width = gray.shape
@@ -181,18 +221,20 @@ def _distinct_crops(name: str, photo_index: int, wanted: int, resolution: int,
         side = int(round(rng.uniform(*_CROP_SCALE) * shorter))
         top = int(rng.integers(0, height - side + 1))
         left = int(rng.integers(0, width - side + 1))
-        patch = gray[top:top + side, left:left + side]
+        patch = gray[top : top + side, left : left + side]
         if patch.std() < _MIN_GRAY_STD or np.mean(patch < 16) > _MAX_DARK_FRACTION:
             continue
         if any(_iou((top, left, side), other) > _MAX_IOU for other in accepted):
             continue
         accepted.append((top, left, side))
     if len(accepted) < wanted:
-        raise ValueError(f"{wanted} crops per photograph are needed but {name!r} gives only "
-                         f"{len(accepted)} distinct ones; ask for fewer or use stimuli.source=procedural")
+        raise ValueError(
+            f"{wanted} crops per photograph are needed but {name!r} gives only "
+            f"{len(accepted)} distinct ones; ask for fewer or use stimuli.source=procedural"
+        )
     out = []
     for top, left, side in accepted:
-        crop = image[top:top + side, left:left + side]
+        crop = image[top : top + side, left : left + side]
         out.append((_resize_square(crop, resolution), f"{name}[y={top},x={left},side={side}]"))
     return out
 
@@ -209,10 +251,13 @@ def _resize_square(image: np.ndarray, resolution: int) -> np.ndarray:
     height, width = image.shape[:2]
     side = min(height, width)
     top, left = (height - side) // 2, (width - side) // 2
-    square = image[top:top + side, left:left + side]
+    square = image[top : top + side, left : left + side]
     shrinking = side >= resolution
-    return cv2.resize(square, (resolution, resolution),
-                      interpolation=cv2.INTER_AREA if shrinking else cv2.INTER_CUBIC)
+    return cv2.resize(
+        square,
+        (resolution, resolution),
+        interpolation=cv2.INTER_AREA if shrinking else cv2.INTER_CUBIC,
+    )
 
 
 # --- the user's own images -------------------------------------------------------------------
@@ -220,7 +265,9 @@ def _image_candidates(folder: Path) -> list[Path]:
     return sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
 
 
-def _folder_images(folder_name: str, count: int | None, resolution: int) -> tuple[list[np.ndarray], list[str]]:
+def _folder_images(
+    folder_name: str, count: int | None, resolution: int
+) -> tuple[list[np.ndarray], list[str]]:
     folder = Path(folder_name).expanduser().resolve()
     textures, names, skipped = [], [], []
     for path in _image_candidates(folder):
@@ -233,23 +280,33 @@ def _folder_images(folder_name: str, count: int | None, resolution: int) -> tupl
         textures.append(_resize_square(cv2.cvtColor(image, cv2.COLOR_BGR2RGB), resolution))
         names.append(path.name)
     if skipped:
-        warnings.warn(f"stimuli.dir={folder_name!r}: skipped {len(skipped)} unreadable file(s): "
-                      f"{', '.join(skipped)}", stacklevel=3)
+        warnings.warn(
+            f"stimuli.dir={folder_name!r}: skipped {len(skipped)} unreadable file(s): "
+            f"{', '.join(skipped)}",
+            stacklevel=3,
+        )
     if not textures:
-        raise ValueError(f"stimuli.dir={folder_name!r} has no usable image "
-                         f"(files tried: {len(skipped)}); put PNG/JPEG/BMP/TIFF images there")
+        raise ValueError(
+            f"stimuli.dir={folder_name!r} has no usable image "
+            f"(files tried: {len(skipped)}); put PNG/JPEG/BMP/TIFF images there"
+        )
     if count is not None and len(textures) < count:
-        raise ValueError(f"stimuli.dir={folder_name!r} has {len(textures)} usable image(s), "
-                         f"fewer than stimuli.count={count}")
+        raise ValueError(
+            f"stimuli.dir={folder_name!r} has {len(textures)} usable image(s), "
+            f"fewer than stimuli.count={count}"
+        )
     return textures, names
 
 
 # --- procedural textures (ablation) ----------------------------------------------------------
-def _procedural(kind: str, split: str, count: int, resolution: int,
-                seed: int) -> tuple[list[np.ndarray], list[str]]:
+def _procedural(
+    kind: str, split: str, count: int, resolution: int, seed: int
+) -> tuple[list[np.ndarray], list[str]]:
     split_code = SPLITS.index(split)  # disjoint random streams for the two splits
     make = _dead_leaves if kind == "dead_leaves" else _pink_noise
-    textures = [make(np.random.default_rng([seed, split_code, i, 104729]), resolution) for i in range(count)]
+    textures = [
+        make(np.random.default_rng([seed, split_code, i, 104729]), resolution) for i in range(count)
+    ]
     return textures, [f"{kind}[{split} {i}]" for i in range(count)]
 
 
@@ -259,7 +316,7 @@ def _dead_leaves(rng: np.random.Generator, resolution: int) -> np.ndarray:
     r_min, r_max = max(1.0, resolution / 128), resolution / 5
     discs = 12 * resolution
     u = rng.random(discs)
-    radii = (r_min ** -2 - u * (r_min ** -2 - r_max ** -2)) ** -0.5
+    radii = (r_min**-2 - u * (r_min**-2 - r_max**-2)) ** -0.5
     centres = rng.integers(0, resolution, size=(discs, 2)).tolist()
     colours = rng.integers(0, 256, size=(discs, 3)).tolist()
     # Plain Python numbers: cv2 converts NumPy scalars slowly.
@@ -287,5 +344,14 @@ def background_image(width: int, height: int) -> np.ndarray:
     return cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
 
 
-__all__ = ["StimulusSet", "load_stimuli", "normalise_settings", "photo", "background_image",
-           "TRAIN_PHOTOS", "HELDOUT_PHOTOS", "BACKGROUND_PHOTO", "SETTING_KEYS"]
+__all__ = [
+    "StimulusSet",
+    "load_stimuli",
+    "normalise_settings",
+    "photo",
+    "background_image",
+    "TRAIN_PHOTOS",
+    "HELDOUT_PHOTOS",
+    "BACKGROUND_PHOTO",
+    "SETTING_KEYS",
+]

@@ -40,14 +40,20 @@ def distance_grid(distances: Sequence[float] | Mapping[str, float] | None) -> tu
     if isinstance(distances, Mapping):
         missing = {"start", "stop", "step"} - set(distances)
         if missing or len(distances) != 3:
-            raise ValueError(f"distances={dict(distances)!r}: a grid needs exactly start, stop and step")
+            raise ValueError(
+                f"distances={dict(distances)!r}: a grid needs exactly start, stop and step"
+            )
         start, stop, step = (float(distances[k]) for k in ("start", "stop", "step"))
         if not all(math.isfinite(v) for v in (start, stop, step)) or step <= 0 or stop < start:
-            raise ValueError(f"distances={dict(distances)!r}: need finite start ≤ stop and step > 0")
+            raise ValueError(
+                f"distances={dict(distances)!r}: need finite start ≤ stop and step > 0"
+            )
         count = int(math.floor((stop - start) / step + 1e-9)) + 1
         values = [round(start + i * step, 9) for i in range(count)]
     elif isinstance(distances, (str, bytes)) or not isinstance(distances, Sequence):
-        raise ValueError(f"distances={distances!r}: expected a list of metres, a start/stop/step grid or None")
+        raise ValueError(
+            f"distances={distances!r}: expected a list of metres, a start/stop/step grid or None"
+        )
     else:
         values = list(distances)
     if not values:
@@ -61,9 +67,14 @@ def check_lateral_positions(lateral_positions: Sequence[float]) -> tuple[float, 
         raise ValueError(f"lateral_positions={lateral_positions!r}: expected a list of metres")
     values = []
     for value in lateral_positions:
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-                or not math.isfinite(value):
-            raise ValueError(f"lateral_positions={list(lateral_positions)!r}: {value!r} is not a finite number")
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float, np.integer, np.floating))
+            or not math.isfinite(value)
+        ):
+            raise ValueError(
+                f"lateral_positions={list(lateral_positions)!r}: {value!r} is not a finite number"
+            )
         values.append(float(value))
     if not values:
         raise ValueError("lateral_positions=[]: expected at least one lateral position")
@@ -74,7 +85,11 @@ def check_lateral_positions(lateral_positions: Sequence[float]) -> tuple[float, 
 
 def _non_negative(name: str, value: Any, unit: str) -> float:
     """``value`` as a float, or a one-line error naming ``name`` if it is not a finite number ≥ 0."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value >= 0):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not (math.isfinite(value) and value >= 0)
+    ):
         raise ValueError(f"{name}={value!r}: expected a number ≥ 0 ({unit})")
     return float(value)
 
@@ -82,21 +97,45 @@ def _non_negative(name: str, value: Any, unit: str) -> float:
 class LateralPursuitTask(base.Task):
     """Pursue the panel with the head pan while the body is put down at l1 … lr."""
 
-    def __init__(self, lateral_positions: Sequence[float], trial_length: int,
-                 distances: tuple[float, ...], num_textures: int, pan_reset: bool = True,
-                 max_pan_increment_deg: float = max(ACTION_SET_DEG), random: Any = None,
-                 initial_pan_jitter_deg: float = 0.0, initial_pan_jitter_deg_per_m: float = 0.0):
+    def __init__(
+        self,
+        lateral_positions: Sequence[float],
+        trial_length: int,
+        distances: tuple[float, ...],
+        num_textures: int,
+        pan_reset: bool = True,
+        max_pan_increment_deg: float = max(ACTION_SET_DEG),
+        random: Any = None,
+        initial_pan_jitter_deg: float = 0.0,
+        initial_pan_jitter_deg_per_m: float = 0.0,
+    ):
         super().__init__(random=random)
-        if isinstance(trial_length, bool) or not isinstance(trial_length, (int, np.integer)) or trial_length < 2:
-            raise ValueError(f"trial_length={trial_length!r}: expected an integer ≥ 2 (t_h iterations per position)")
+        if (
+            isinstance(trial_length, bool)
+            or not isinstance(trial_length, (int, np.integer))
+            or trial_length < 2
+        ):
+            raise ValueError(
+                f"trial_length={trial_length!r}: expected an integer ≥ 2 (t_h iterations per position)"
+            )
         if not isinstance(pan_reset, (bool, np.bool_)):
             raise ValueError(f"pan_reset={pan_reset!r}: expected True (reset to 0) or False (keep)")
-        if isinstance(max_pan_increment_deg, bool) or not isinstance(max_pan_increment_deg, (int, float)) \
-                or not (math.isfinite(max_pan_increment_deg) and max_pan_increment_deg > 0):
-            raise ValueError(f"max_pan_increment_deg={max_pan_increment_deg!r}: expected a positive number")
-        self._initial_pan_jitter = _non_negative("initial_pan_jitter_deg", initial_pan_jitter_deg, "degrees")
-        self._initial_pan_jitter_per_m = _non_negative("initial_pan_jitter_deg_per_m", initial_pan_jitter_deg_per_m,
-                                                       "degrees per metre of lateral step")
+        if (
+            isinstance(max_pan_increment_deg, bool)
+            or not isinstance(max_pan_increment_deg, (int, float))
+            or not (math.isfinite(max_pan_increment_deg) and max_pan_increment_deg > 0)
+        ):
+            raise ValueError(
+                f"max_pan_increment_deg={max_pan_increment_deg!r}: expected a positive number"
+            )
+        self._initial_pan_jitter = _non_negative(
+            "initial_pan_jitter_deg", initial_pan_jitter_deg, "degrees"
+        )
+        self._initial_pan_jitter_per_m = _non_negative(
+            "initial_pan_jitter_deg_per_m",
+            initial_pan_jitter_deg_per_m,
+            "degrees per metre of lateral step",
+        )
         self._pending_positions = check_lateral_positions(lateral_positions)
         self._episode_positions = self._pending_positions
         self._trial_length = int(trial_length)
@@ -147,13 +186,20 @@ class LateralPursuitTask(base.Task):
         """Use the list L from the next reset on."""
         self._pending_positions = check_lateral_positions(lateral_positions)
 
-    def set_next_stimulus(self, texture_index: int | None = None, distance: float | None = None) -> None:
+    def set_next_stimulus(
+        self, texture_index: int | None = None, distance: float | None = None
+    ) -> None:
         """Force the next reset's texture and/or distance (one reset only; the random draws still happen)."""
         if texture_index is not None:
-            if isinstance(texture_index, bool) or not isinstance(texture_index, (int, np.integer)) \
-                    or not 0 <= texture_index < self._num_textures:
-                raise ValueError(f"texture index {texture_index!r} is out of range: {self._num_textures} "
-                                 f"textures (0..{self._num_textures - 1})")
+            if (
+                isinstance(texture_index, bool)
+                or not isinstance(texture_index, (int, np.integer))
+                or not 0 <= texture_index < self._num_textures
+            ):
+                raise ValueError(
+                    f"texture index {texture_index!r} is out of range: {self._num_textures} "
+                    f"textures (0..{self._num_textures - 1})"
+                )
             self._forced_texture = int(texture_index)
         if distance is not None:
             self._forced_distance = check_distance(distance)
@@ -170,13 +216,22 @@ class LateralPursuitTask(base.Task):
             raise ValueError(f"start jitter must be True or False, got {enabled!r}")
         self._start_jitter_enabled = bool(enabled)
 
-    def set_perturbation(self, camera_rotation_deg: float | None = None, blur_sigma: float | None = None,
-                         rotation_axis: str | Sequence[float] | None = None) -> None:
+    def set_perturbation(
+        self,
+        camera_rotation_deg: float | None = None,
+        blur_sigma: float | None = None,
+        rotation_axis: str | Sequence[float] | None = None,
+    ) -> None:
         """Switch the §5 perturbations on or off, immediately (no recompile)."""
         if self._physics is None:
-            raise RuntimeError("the task is not attached to a physics; build it with parallax.envs.load")
-        self._physics.set_perturbation(camera_rotation_deg=camera_rotation_deg, blur_sigma=blur_sigma,
-                                       rotation_axis=rotation_axis)
+            raise RuntimeError(
+                "the task is not attached to a physics; build it with parallax.envs.load"
+            )
+        self._physics.set_perturbation(
+            camera_rotation_deg=camera_rotation_deg,
+            blur_sigma=blur_sigma,
+            rotation_axis=rotation_axis,
+        )
 
     # --- dm_control Task interface -----------------------------------------------------------
     def initialize_episode(self, physics: Physics) -> None:
@@ -210,7 +265,9 @@ class LateralPursuitTask(base.Task):
         self._iteration = 0
         physics.set_lateral_position(self._episode_positions[self._position_index])
         if self._pan_reset:
-            physics.set_pan_deg(self._trial_start_pan(self._episode_positions[self._position_index]))
+            physics.set_pan_deg(
+                self._trial_start_pan(self._episode_positions[self._position_index])
+            )
 
     def _trial_start_pan(self, lateral_m: float) -> float:
         """The pan a trial starts from: 0 (the paper), or uniform in ±(initial_pan_jitter_deg +
@@ -229,8 +286,10 @@ class LateralPursuitTask(base.Task):
             raise ValueError(f"action={action!r}: expected one finite pan increment in degrees")
         increment = float(value.reshape(()))
         if abs(increment) > self._max_increment + 1e-9:
-            raise ValueError(f"action={increment!r}°: a pan increment must lie within "
-                             f"±{self._max_increment}° (A = {ACTION_SET_DEG})")
+            raise ValueError(
+                f"action={increment!r}°: a pan increment must lie within "
+                f"±{self._max_increment}° (A = {ACTION_SET_DEG})"
+            )
         return increment
 
     def get_observation(self, physics: Physics) -> OrderedDict:
@@ -256,8 +315,13 @@ class LateralPursuitTask(base.Task):
         return None
 
     def action_spec(self, physics: Physics) -> specs.BoundedArray:
-        return specs.BoundedArray(shape=(), dtype=np.float64, minimum=-self._max_increment,
-                                  maximum=self._max_increment, name="pan_increment_deg")
+        return specs.BoundedArray(
+            shape=(),
+            dtype=np.float64,
+            minimum=-self._max_increment,
+            maximum=self._max_increment,
+            name="pan_increment_deg",
+        )
 
     def observation_spec(self, physics: Physics) -> OrderedDict:
         size = physics.image_size
@@ -265,11 +329,14 @@ class LateralPursuitTask(base.Task):
         scalar = specs.Array((), np.float64)
         index = specs.Array((), np.int32)
         return OrderedDict(
-            reference=image.replace(name="reference"), image=image.replace(name="image"),
-            pan=scalar.replace(name="pan"), target_pan=scalar.replace(name="target_pan"),
+            reference=image.replace(name="reference"),
+            image=image.replace(name="image"),
+            pan=scalar.replace(name="pan"),
+            target_pan=scalar.replace(name="target_pan"),
             distance=scalar.replace(name="distance"),
             lateral_position=scalar.replace(name="lateral_position"),
-            position_index=index.replace(name="position_index"), iteration=index.replace(name="iteration"),
+            position_index=index.replace(name="position_index"),
+            iteration=index.replace(name="iteration"),
             texture_index=index.replace(name="texture_index"),
         )
 
@@ -281,19 +348,21 @@ class PursuitEnvironment(control.Environment):
         self.physics.close_renderer()
 
 
-def load(seed: int | None = None,
-         lateral_positions: Sequence[float] = (0.05,),
-         trial_length: int = 30,
-         distances: Sequence[float] | Mapping[str, float] | None = None,
-         stimuli: Mapping[str, Any] | None = None,
-         image_size: int = 256,
-         pan_reset: bool = True,
-         camera_rotation_deg: float = 0.0,
-         rotation_axis: str | Sequence[float] = "optical",
-         blur_sigma: float = 0.0,
-         max_pan_increment_deg: float = max(ACTION_SET_DEG),
-         initial_pan_jitter_deg: float = 0.0,
-         initial_pan_jitter_deg_per_m: float = 0.0) -> PursuitEnvironment:
+def load(
+    seed: int | None = None,
+    lateral_positions: Sequence[float] = (0.05,),
+    trial_length: int = 30,
+    distances: Sequence[float] | Mapping[str, float] | None = None,
+    stimuli: Mapping[str, Any] | None = None,
+    image_size: int = 256,
+    pan_reset: bool = True,
+    camera_rotation_deg: float = 0.0,
+    rotation_axis: str | Sequence[float] = "optical",
+    blur_sigma: float = 0.0,
+    max_pan_increment_deg: float = max(ACTION_SET_DEG),
+    initial_pan_jitter_deg: float = 0.0,
+    initial_pan_jitter_deg_per_m: float = 0.0,
+) -> PursuitEnvironment:
     """The HOAP-3 lateral-pursuit world as a dm_control environment (see the module docstring).
 
     ``stimuli``: {"source": "skimage" | "dir" | "procedural", "split": "train" | "heldout",
@@ -303,12 +372,20 @@ def load(seed: int | None = None,
     lateral = check_lateral_positions(lateral_positions)
     grid = distance_grid(distances)
     texture_set = load_stimuli(stimuli)
-    task = LateralPursuitTask(lateral, trial_length, grid, texture_set.count, pan_reset=pan_reset,
-                              max_pan_increment_deg=max_pan_increment_deg, random=seed,
-                              initial_pan_jitter_deg=initial_pan_jitter_deg,
-                              initial_pan_jitter_deg_per_m=initial_pan_jitter_deg_per_m)
+    task = LateralPursuitTask(
+        lateral,
+        trial_length,
+        grid,
+        texture_set.count,
+        pan_reset=pan_reset,
+        max_pan_increment_deg=max_pan_increment_deg,
+        random=seed,
+        initial_pan_jitter_deg=initial_pan_jitter_deg,
+        initial_pan_jitter_deg_per_m=initial_pan_jitter_deg_per_m,
+    )
     physics = Physics.create(texture_set, image_size=image_size, max_distance_m=max(grid))
-    physics.set_perturbation(camera_rotation_deg=camera_rotation_deg, blur_sigma=blur_sigma,
-                             rotation_axis=rotation_axis)
+    physics.set_perturbation(
+        camera_rotation_deg=camera_rotation_deg, blur_sigma=blur_sigma, rotation_axis=rotation_axis
+    )
     task.attach(physics)
     return PursuitEnvironment(physics, task, time_limit=float("inf"))

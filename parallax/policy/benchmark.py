@@ -26,8 +26,9 @@ def _pooled_activities(batch: int, generator: torch.Generator) -> torch.Tensor:
     return torch.rand(batch, STATE_DIM, generator=generator) * 0.012
 
 
-def _time_iteration(policy: NaturalActorCritic, batch: int, repeats: int
-                    ) -> tuple[float, float, float]:
+def _time_iteration(
+    policy: NaturalActorCritic, batch: int, repeats: int
+) -> tuple[float, float, float]:
     """Median ms of act, of update, and of act + update (the trainer's per-iteration cost)."""
     generator = torch.Generator().manual_seed(0)
     states = [_pooled_activities(batch, generator) for _ in range(repeats + WARMUP + 1)]
@@ -45,8 +46,7 @@ def _time_iteration(policy: NaturalActorCritic, batch: int, repeats: int
             update_ms.append((middle - start) * 1e3)
             act_ms.append((end - middle) * 1e3)
             both_ms.append((end - start) * 1e3)
-    return (statistics.median(act_ms), statistics.median(update_ms),
-            statistics.median(both_ms))
+    return (statistics.median(act_ms), statistics.median(update_ms), statistics.median(both_ms))
 
 
 def run(repeats: int = 50) -> dict[str, float]:

@@ -51,8 +51,9 @@ _TINY_STD = 1e-9
 class FeatureNormalizer(nn.Module):
     """Maps raw states (B, state_dim) to the features φ the learner is linear in."""
 
-    def __init__(self, state_dim: int, num_scales: int, mode: str = "none",
-                 horizon: int = 0) -> None:
+    def __init__(
+        self, state_dim: int, num_scales: int, mode: str = "none", horizon: int = 0
+    ) -> None:
         super().__init__()
         if mode not in FEATURE_NORMS:
             raise ValueError(f"feature_norm must be one of {FEATURE_NORMS}, got {mode!r}")
@@ -60,7 +61,8 @@ class FeatureNormalizer(nn.Module):
             raise ValueError(f"zscore_horizon must be a non-negative int, got {horizon!r}")
         if state_dim % num_scales != 0:
             raise ValueError(
-                f"state_dim={state_dim} does not split evenly into num_scales={num_scales}")
+                f"state_dim={state_dim} does not split evenly into num_scales={num_scales}"
+            )
         self.state_dim = state_dim
         self.num_scales = num_scales
         self.mode = mode
@@ -94,7 +96,7 @@ class FeatureNormalizer(nn.Module):
             return
         delta = batch_mean - self.mean
         self.mean += delta * (batch_count / total)
-        self.sum_sq_dev += batch_sum_sq_dev + delta ** 2 * (self.count * batch_count / total)
+        self.sum_sq_dev += batch_sum_sq_dev + delta**2 * (self.count * batch_count / total)
         self.count.copy_(total)
 
     def forward(self, states: torch.Tensor) -> torch.Tensor:
@@ -110,7 +112,9 @@ class FeatureNormalizer(nn.Module):
             differences = states.to(self.mean.dtype)
             norm = differences.norm(dim=1, keepdim=True)
             scale = torch.maximum(norm, self.norm_mean.expand_as(norm))
-            return torch.where(scale > _TINY_L1, differences / scale.clamp(min=_TINY_L1), 0.0).to(states.dtype)
+            return torch.where(scale > _TINY_L1, differences / scale.clamp(min=_TINY_L1), 0.0).to(
+                states.dtype
+            )
         centred = states.to(self.mean.dtype) - self.mean
         if self.mode == "centred_unit":
             return _unit_rows(centred).to(states.dtype)

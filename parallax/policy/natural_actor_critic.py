@@ -105,8 +105,9 @@ class NaturalActorCritic(nn.Module):
             raise ValueError(f"actions must be finite numbers of degrees, got {action_list!r}")
         self.state_dim = state_dim
         self.num_scales = num_scales
-        self.eye_position_reference_m = _check_non_negative("eye_position_reference_m",
-                                                            eye_position_reference_m)
+        self.eye_position_reference_m = _check_non_negative(
+            "eye_position_reference_m", eye_position_reference_m
+        )
         # Beyond the paper: one proprioceptive entry after the normalised θ (see eye_position_feature).
         self.eye_position_dims = 1 if self.eye_position_reference_m > 0 else 0
         # Beyond the paper: one more entry, the last step's change of reward in its direction
@@ -122,12 +123,14 @@ class NaturalActorCritic(nn.Module):
         self.weight_decay = _check_non_negative("weight_decay", weight_decay)
         if self.actor_lr * self.weight_decay >= 1:
             raise ValueError(
-                f"actor_lr·weight_decay must be below 1, got {self.actor_lr}·{self.weight_decay}")
+                f"actor_lr·weight_decay must be below 1, got {self.actor_lr}·{self.weight_decay}"
+            )
         self.temperature = _check_positive("temperature", temperature)
         seed = _check_int("seed", seed, minimum=0)
 
-        self.normalizer = FeatureNormalizer(state_dim, num_scales, feature_norm,
-                                            _check_int("zscore_horizon", zscore_horizon, 0))
+        self.normalizer = FeatureNormalizer(
+            state_dim, num_scales, feature_norm, _check_int("zscore_horizon", zscore_horizon, 0)
+        )
         num_actions = len(action_list)
         # float64 so that the pan increments sent to the robot are the configured degrees exactly.
         self.register_buffer("action_values", torch.tensor(action_list, dtype=torch.float64))
@@ -139,9 +142,13 @@ class NaturalActorCritic(nn.Module):
         self.register_buffer("rejected_updates", torch.zeros((), dtype=torch.int64))
         # Ties in the greedy choice go to the smallest pan step, so an untrained (all-zero) actor
         # keeps the eye still instead of always turning it the same way.
-        self.register_buffer("_greedy_tie_order", torch.argsort(
-            torch.tensor([abs(a) for a in action_list], dtype=torch.float64), stable=True),
-            persistent=False)
+        self.register_buffer(
+            "_greedy_tie_order",
+            torch.argsort(
+                torch.tensor([abs(a) for a in action_list], dtype=torch.float64), stable=True
+            ),
+            persistent=False,
+        )
         # Sampling draws uniforms on the CPU and inverts the CDF on the module's device, so the
         # same seed gives the same actions on every device.
         self._generator = torch.Generator(device="cpu")
@@ -158,8 +165,11 @@ class NaturalActorCritic(nn.Module):
     # ------------------------------------------------------------------ checks
 
     def _check_states(self, name: str, states: torch.Tensor) -> torch.Tensor:
-        if not isinstance(states, torch.Tensor) or states.ndim != 2 \
-                or states.shape[1] != self.input_dim:
+        if (
+            not isinstance(states, torch.Tensor)
+            or states.ndim != 2
+            or states.shape[1] != self.input_dim
+        ):
             shape = tuple(states.shape) if isinstance(states, torch.Tensor) else type(states)
             raise ValueError(f"{name} must be a (B, {self.input_dim}) tensor, got {shape}")
         if not states.is_floating_point():
@@ -185,8 +195,9 @@ class NaturalActorCritic(nn.Module):
         if any, pass unchanged."""
         if self.input_dim == self.state_dim:
             return self.normalizer(states)
-        return torch.cat([self.normalizer(states[:, :self.state_dim]),
-                          states[:, self.state_dim:]], dim=1)
+        return torch.cat(
+            [self.normalizer(states[:, : self.state_dim]), states[:, self.state_dim :]], dim=1
+        )
 
     def eye_position_feature(self, pan_deg: torch.Tensor, lateral_m: float) -> torch.Tensor:
         """The proprioceptive entry (B, 1) for pans (B,) in degrees at lateral position l (m).
@@ -198,14 +209,22 @@ class NaturalActorCritic(nn.Module):
         image pair no longer overlaps, a pan past the target and one short of it look alike
         (``python -m parallax.landscape … --span 4``). ν is 0 at l = 0, where no pan is implied.
         """
-        pan = torch.as_tensor(pan_deg, dtype=self.actor.dtype, device=self.actor.device).reshape(-1, 1)
+        pan = torch.as_tensor(pan_deg, dtype=self.actor.dtype, device=self.actor.device).reshape(
+            -1, 1
+        )
         if abs(lateral_m) < 1e-9:
             return torch.zeros_like(pan)
-        nearness = torch.tan(torch.deg2rad(pan)) * (self.eye_position_reference_m / float(lateral_m))
+        nearness = torch.tan(torch.deg2rad(pan)) * (
+            self.eye_position_reference_m / float(lateral_m)
+        )
         return nearness.clamp(-1.0, 1.0)
 
-    def reward_change_feature(self, rewards: torch.Tensor, previous_rewards: torch.Tensor,
-                              previous_increments: torch.Tensor) -> torch.Tensor:
+    def reward_change_feature(
+        self,
+        rewards: torch.Tensor,
+        previous_rewards: torch.Tensor,
+        previous_increments: torch.Tensor,
+    ) -> torch.Tensor:
         """The reward-change entry (B, 1): how much the last pan step changed the reward, signed
         by the step's direction.
 
@@ -226,7 +245,9 @@ class NaturalActorCritic(nn.Module):
         direction = np.sign(np.asarray(previous_increments, dtype=np.float64).reshape(-1))
         relative = (rewards - previous) / np.maximum(np.abs(previous), 1e-12)
         change = np.clip(self.reward_change_gain * relative * direction, -1.0, 1.0)
-        return torch.from_numpy(change.reshape(-1, 1)).to(device=self.actor.device, dtype=self.actor.dtype)
+        return torch.from_numpy(change.reshape(-1, 1)).to(
+            device=self.actor.device, dtype=self.actor.dtype
+        )
 
     def _logits(self, features: torch.Tensor) -> torch.Tensor:
         return features @ self.actor.T / self.temperature
@@ -244,7 +265,7 @@ class NaturalActorCritic(nn.Module):
         """
         states = self._check_states("phi", phi)
         if self.training:
-            self.normalizer.observe(states[:, :self.state_dim])
+            self.normalizer.observe(states[:, : self.state_dim])
         logits = self._logits(self._normalise(states))
         if greedy:
             ordered = logits[:, self._greedy_tie_order]
@@ -257,8 +278,14 @@ class NaturalActorCritic(nn.Module):
     # ------------------------------------------------------------------ learning
 
     @torch.no_grad()
-    def update(self, phi: torch.Tensor, action: torch.Tensor, reward: torch.Tensor,
-               next_phi: torch.Tensor, valid: torch.Tensor) -> dict[str, float]:
+    def update(
+        self,
+        phi: torch.Tensor,
+        action: torch.Tensor,
+        reward: torch.Tensor,
+        next_phi: torch.Tensor,
+        valid: torch.Tensor,
+    ) -> dict[str, float]:
         """One step of algorithm 3 for the transitions (φ, a, r, φ′) of B robots.
 
         ``reward`` is the reward observed in φ′ (the coder's −(eC + eF) for the next image);
@@ -274,8 +301,10 @@ class NaturalActorCritic(nn.Module):
         if action.dtype != torch.int64:
             raise ValueError(f"action must be an int64 (LongTensor) of indices, got {action.dtype}")
         if batch and (int(action.min()) < 0 or int(action.max()) >= self.num_actions):
-            raise ValueError(f"action indices must lie in [0, {self.num_actions}), "
-                             f"got {action.min().item()}..{action.max().item()}")
+            raise ValueError(
+                f"action indices must lie in [0, {self.num_actions}), "
+                f"got {action.min().item()}..{action.max().item()}"
+            )
         reward = self._check_rows("reward", reward, batch).to(self.actor.dtype)
         if not bool(torch.isfinite(reward).all()):
             raise ValueError("reward holds non-finite values")
@@ -285,35 +314,55 @@ class NaturalActorCritic(nn.Module):
 
         probabilities = torch.softmax(self._logits(features), dim=1)
         entropy = -(probabilities * torch.log(probabilities.clamp(min=1e-30))).sum(dim=1)
-        td_error = self._apply_update(features[valid], action[valid], reward[valid],
-                                      next_features[valid], probabilities[valid])
+        td_error = self._apply_update(
+            features[valid],
+            action[valid],
+            reward[valid],
+            next_features[valid],
+            probabilities[valid],
+        )
         valid_count = int(valid.sum())
-        summary = torch.stack([
-            td_error.mean() if valid_count else torch.zeros((), device=features.device),
-            self.average_reward,
-            entropy.mean() if batch else torch.zeros((), device=features.device),
-            (features @ self.critic).mean() if batch else torch.zeros((), device=features.device),
-            self.advantage.norm(),
-            self.actor.norm(),
-        ]).tolist()
+        summary = torch.stack(
+            [
+                td_error.mean() if valid_count else torch.zeros((), device=features.device),
+                self.average_reward,
+                entropy.mean() if batch else torch.zeros((), device=features.device),
+                (features @ self.critic).mean()
+                if batch
+                else torch.zeros((), device=features.device),
+                self.advantage.norm(),
+                self.actor.norm(),
+            ]
+        ).tolist()
         names = ("td_error", "average_reward", "entropy", "value", "advantage_norm", "actor_norm")
         stats = dict(zip(names, summary))
         stats["valid_fraction"] = valid_count / batch if batch else 0.0
         stats["rejected_updates"] = float(self.rejected_updates)
         return stats
 
-    def _apply_update(self, features: torch.Tensor, action: torch.Tensor, reward: torch.Tensor,
-                      next_features: torch.Tensor, probabilities: torch.Tensor) -> torch.Tensor:
+    def _apply_update(
+        self,
+        features: torch.Tensor,
+        action: torch.Tensor,
+        reward: torch.Tensor,
+        next_features: torch.Tensor,
+        probabilities: torch.Tensor,
+    ) -> torch.Tensor:
         """Applies the mean of the per-row updates of the (valid) rows given; returns their δ."""
         count = features.shape[0]
         if count == 0:
             return features.new_zeros(0)
         # Each robot's own J update enters its δ, so that the batch applies exactly the mean of
         # the single-robot updates; the new J is their mean.
-        row_average_reward = ((1 - self.reward_rate) * self.average_reward
-                              + self.reward_rate * reward)
-        td_error = (reward - row_average_reward + self.discount * (next_features @ self.critic)
-                    - features @ self.critic)
+        row_average_reward = (
+            1 - self.reward_rate
+        ) * self.average_reward + self.reward_rate * reward
+        td_error = (
+            reward
+            - row_average_reward
+            + self.discount * (next_features @ self.critic)
+            - features @ self.critic
+        )
         self.average_reward.copy_(row_average_reward.mean())
         # Per row ψ = ((e_a − π) ⊗ φ)/T and ψᵀw = (e_a − π)·(wφ)/T: no (B, |A|, D) tensor.
         score = -probabilities
@@ -323,15 +372,18 @@ class NaturalActorCritic(nn.Module):
         # mean_i (δ_i − ψ_iᵀw)·ψ_i  =  Σ_i (δ_i − ψ_iᵀw)·score_i ⊗ φ_i / B
         advantage_step = ((td_error - advantage_estimate).unsqueeze(1) * score).T @ features
         critic_step = td_error @ features
-        if not (bool(torch.isfinite(critic_step).all()) and bool(torch.isfinite(advantage_step).all())):
+        if not (
+            bool(torch.isfinite(critic_step).all()) and bool(torch.isfinite(advantage_step).all())
+        ):
             # A diverging step would poison v, w and Θ for good (NaN logits → a constant action);
             # reject it and keep the parameters, as LM rejects a failed step.
             self.rejected_updates.add_(1)
             return td_error
         self.critic.add_(critic_step, alpha=self.critic_lr / count)
         self.advantage.add_(advantage_step, alpha=self.advantage_lr / count)
-        self.actor.mul_(1 - self.actor_lr * self.weight_decay).add_(self.advantage,
-                                                                    alpha=self.actor_lr)
+        self.actor.mul_(1 - self.actor_lr * self.weight_decay).add_(
+            self.advantage, alpha=self.actor_lr
+        )
         self.updates.add_(1)
         return td_error
 
@@ -347,10 +399,12 @@ class NaturalActorCritic(nn.Module):
         self._generator.set_state(state["generator"].cpu())
 
     def extra_repr(self) -> str:
-        return (f"state_dim={self.state_dim}, actions={self.action_values.tolist()}, "
-                f"α_v={self.critic_lr}, α_n={self.advantage_lr}, α_p={self.actor_lr}, "
-                f"ξ={self.discount}, ζ={self.reward_rate}, λ={self.weight_decay}, "
-                f"T={self.temperature}, feature_norm={self.feature_norm!r}, "
-                f"zscore_horizon={self.normalizer.horizon}, "
-                f"eye_position_reference_m={self.eye_position_reference_m}, "
-                f"reward_change_gain={self.reward_change_gain}")
+        return (
+            f"state_dim={self.state_dim}, actions={self.action_values.tolist()}, "
+            f"α_v={self.critic_lr}, α_n={self.advantage_lr}, α_p={self.actor_lr}, "
+            f"ξ={self.discount}, ζ={self.reward_rate}, λ={self.weight_decay}, "
+            f"T={self.temperature}, feature_norm={self.feature_norm!r}, "
+            f"zscore_horizon={self.normalizer.horizon}, "
+            f"eye_position_reference_m={self.eye_position_reference_m}, "
+            f"reward_change_gain={self.reward_change_gain}"
+        )

@@ -36,11 +36,11 @@ class PursuitTaskConfig:
     num_scales: int = 2
     max_offset_deg: float = 1.0
     episode_length: int = 20
-    tuning_width_deg: tuple[float, ...] = (0.4, 0.1)    # coarse, fine
+    tuning_width_deg: tuple[float, ...] = (0.4, 0.1)  # coarse, fine
     tuned_fraction: float = 0.5
     mean_activity: float = 0.006
-    texture_spread: float = 0.3                          # σ of the log per-episode unit gains
-    noise: float = 0.2                                   # relative per-step noise
+    texture_spread: float = 0.3  # σ of the log per-episode unit gains
+    noise: float = 0.2  # relative per-step noise
 
     @property
     def state_dim(self) -> int:
@@ -54,18 +54,19 @@ class SyntheticPursuit:
         if num_robots <= 0:
             raise ValueError(f"num_robots must be positive, got {num_robots!r}")
         if len(config.tuning_width_deg) != config.num_scales:
-            raise ValueError(f"tuning_width_deg needs one width per scale "
-                             f"({config.num_scales}), got {config.tuning_width_deg!r}")
+            raise ValueError(
+                f"tuning_width_deg needs one width per scale "
+                f"({config.num_scales}), got {config.tuning_width_deg!r}"
+            )
         self.config = config
         self.num_robots = num_robots
         self.generator = torch.Generator().manual_seed(seed)
         units, span = config.state_dim, config.max_offset_deg
         self.preferred = (torch.rand(units, generator=self.generator) * 2 - 1) * (span + 0.2)
-        self.width = torch.tensor(config.tuning_width_deg).repeat_interleave(
-            config.units_per_scale)
+        self.width = torch.tensor(config.tuning_width_deg).repeat_interleave(config.units_per_scale)
         self.tuned = torch.rand(units, generator=self.generator) < config.tuned_fraction
         grid = torch.linspace(-span, span, 101)
-        typical = self._responses(grid).mean() * math.exp(config.texture_spread ** 2 / 2)
+        typical = self._responses(grid).mean() * math.exp(config.texture_spread**2 / 2)
         self.activity_scale = config.mean_activity / float(typical)
         self.offset = torch.zeros(num_robots)
         self.texture = torch.ones(num_robots, units)
@@ -75,8 +76,9 @@ class SyntheticPursuit:
     def _new_episode(self, rows: torch.Tensor) -> None:
         count, cfg = int(rows.sum()), self.config
         start = (torch.rand(count, generator=self.generator) * 2 - 1) * cfg.max_offset_deg
-        gains = torch.exp(cfg.texture_spread * torch.randn(count, cfg.state_dim,
-                                                            generator=self.generator))
+        gains = torch.exp(
+            cfg.texture_spread * torch.randn(count, cfg.state_dim, generator=self.generator)
+        )
         self.offset[rows] = start
         self.texture[rows] = gains
         self.step_in_episode[rows] = 0
@@ -107,14 +109,20 @@ class SyntheticPursuit:
         return restart
 
 
-def correcting_fraction(policy: NaturalActorCritic, task: SyntheticPursuit,
-                        num_offsets: int = 200, textures_per_offset: int = 4) -> float:
+def correcting_fraction(
+    policy: NaturalActorCritic,
+    task: SyntheticPursuit,
+    num_offsets: int = 200,
+    textures_per_offset: int = 4,
+) -> float:
     """Fraction of evaluation states (|x| ≥ DEAD_ZONE_DEG) where the greedy action reduces |x|."""
     span = task.config.max_offset_deg
     grid = torch.linspace(-span, span, num_offsets)
     grid = grid[grid.abs() >= DEAD_ZONE_DEG].repeat(textures_per_offset)
-    texture = torch.exp(task.config.texture_spread * torch.randn(
-        grid.shape[0], task.config.state_dim, generator=task.generator))
+    texture = torch.exp(
+        task.config.texture_spread
+        * torch.randn(grid.shape[0], task.config.state_dim, generator=task.generator)
+    )
     was_training = policy.training
     policy.eval()
     pan = policy.action_values[policy.act(task.activities(grid, texture), greedy=True)]
@@ -124,13 +132,14 @@ def correcting_fraction(policy: NaturalActorCritic, task: SyntheticPursuit,
 
 class CurvePoint(NamedTuple):
     step: int
-    reward: float        # mean reward of the sampling policy over the last window of steps
-    entropy: float       # mean policy entropy over that window (log 7 ≈ 1.95 is uniform)
-    correcting: float    # correcting_fraction of the greedy policy at this step
+    reward: float  # mean reward of the sampling policy over the last window of steps
+    entropy: float  # mean policy entropy over that window (log 7 ≈ 1.95 is uniform)
+    correcting: float  # correcting_fraction of the greedy policy at this step
 
 
-def train_on_synthetic_pursuit(policy: NaturalActorCritic, task: SyntheticPursuit,
-                               steps: int, evaluate_every: int = 0) -> list[CurvePoint]:
+def train_on_synthetic_pursuit(
+    policy: NaturalActorCritic, task: SyntheticPursuit, steps: int, evaluate_every: int = 0
+) -> list[CurvePoint]:
     """Runs the trainer's loop (update the last transition, then act) for ``steps`` steps.
 
     Returns the learning curve, one point every ``evaluate_every`` steps (none if 0) and one at
@@ -153,39 +162,53 @@ def train_on_synthetic_pursuit(policy: NaturalActorCritic, task: SyntheticPursui
         valid = ~restarted
         previous_state, previous_action = state, action
         if (evaluate_every and step % evaluate_every == 0) or step == steps:
-            curve.append(CurvePoint(step, reward_sum / window, entropy_sum / window,
-                                    correcting_fraction(policy, task)))
+            curve.append(
+                CurvePoint(
+                    step,
+                    reward_sum / window,
+                    entropy_sum / window,
+                    correcting_fraction(policy, task),
+                )
+            )
             reward_sum, entropy_sum, window = 0.0, 0.0, 0
     return curve
 
 
-def run_seeds(seeds: Sequence[int], steps: int, num_robots: int = 32,
-              config: PursuitTaskConfig | None = None, evaluations: int = 10,
-              **policy_kwargs: object) -> list[list[CurvePoint]]:
+def run_seeds(
+    seeds: Sequence[int],
+    steps: int,
+    num_robots: int = 32,
+    config: PursuitTaskConfig | None = None,
+    evaluations: int = 10,
+    **policy_kwargs: object,
+) -> list[list[CurvePoint]]:
     """Learning curves of fresh policies (built with ``policy_kwargs``) for several seeds."""
     config = config or PursuitTaskConfig()
     curves = []
     for seed in seeds:
         task = SyntheticPursuit(num_robots, config, seed=seed)
-        policy = NaturalActorCritic(state_dim=config.state_dim, num_scales=config.num_scales,
-                                    seed=seed, **policy_kwargs)
-        curves.append(train_on_synthetic_pursuit(policy, task, steps,
-                                                 max(steps // evaluations, 1)))
+        policy = NaturalActorCritic(
+            state_dim=config.state_dim, num_scales=config.num_scales, seed=seed, **policy_kwargs
+        )
+        curves.append(train_on_synthetic_pursuit(policy, task, steps, max(steps // evaluations, 1)))
     return curves
 
 
 def mean_curve(curves: list[list[CurvePoint]]) -> list[CurvePoint]:
     """Point-wise mean of learning curves taken at the same steps."""
-    return [CurvePoint(points[0].step, *(sum(p[i] for p in points) / len(points)
-                                         for i in (1, 2, 3)))
-            for points in zip(*curves)]
+    return [
+        CurvePoint(points[0].step, *(sum(p[i] for p in points) / len(points) for i in (1, 2, 3)))
+        for points in zip(*curves)
+    ]
 
 
 def plot_curves(curves: dict[str, list[CurvePoint]], path: str) -> None:
     """Reward and entropy of the sampling policy against steps, one line per setting."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     figure, axes = plt.subplots(1, 3, figsize=(13, 4.0))
     for label, curve in curves.items():
         steps = [p.step for p in curve]
@@ -193,8 +216,9 @@ def plot_curves(curves: dict[str, list[CurvePoint]], path: str) -> None:
         axes[0].plot(steps, [p.reward for p in curve], label=short)
         axes[1].plot(steps, [p.entropy for p in curve])
         axes[2].plot(steps, [p.correcting for p in curve])
-    for axis, title in zip(axes, ("mean reward −|offset| (sampling)", "policy entropy",
-                                  "greedy correcting fraction")):
+    for axis, title in zip(
+        axes, ("mean reward −|offset| (sampling)", "policy entropy", "greedy correcting fraction")
+    ):
         axis.set_title(title)
         axis.set_xlabel("update steps")
         axis.grid(alpha=0.3)
@@ -206,25 +230,34 @@ def plot_curves(curves: dict[str, list[CurvePoint]], path: str) -> None:
 def main(argv: Sequence[str] | None = None) -> None:
     import argparse
     import json
+
     parser = argparse.ArgumentParser(description="learning curves on the synthetic pursuit task")
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--robots", type=int, default=32)
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--policy", type=json.loads, action="append",
-                        help='NaturalActorCritic keywords as JSON, e.g. {"feature_norm": "zscore"};'
-                             " repeat to compare settings")
+    parser.add_argument(
+        "--policy",
+        type=json.loads,
+        action="append",
+        help='NaturalActorCritic keywords as JSON, e.g. {"feature_norm": "zscore"};'
+        " repeat to compare settings",
+    )
     parser.add_argument("--plot", help="write the learning curves to this image")
     arguments = parser.parse_args(argv)
     torch.set_num_threads(1)  # tiny tensors: extra threads only add synchronisation
     curves = {}
     for settings in arguments.policy or [{}]:
         label = json.dumps(settings)
-        curves[label] = mean_curve(run_seeds(range(arguments.seeds), arguments.steps,
-                                             arguments.robots, **settings))
+        curves[label] = mean_curve(
+            run_seeds(range(arguments.seeds), arguments.steps, arguments.robots, **settings)
+        )
         print(label, flush=True)
         for point in curves[label]:
-            print(f"step {point.step:6d}  reward {point.reward:+.3f}  entropy {point.entropy:.3f}"
-                  f"  correcting {point.correcting:.3f}", flush=True)
+            print(
+                f"step {point.step:6d}  reward {point.reward:+.3f}  entropy {point.entropy:.3f}"
+                f"  correcting {point.correcting:.3f}",
+                flush=True,
+            )
     if arguments.plot:
         plot_curves(curves, arguments.plot)
 
