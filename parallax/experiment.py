@@ -8,7 +8,7 @@ each lateral position l_p of L, t_h iterations of
 and the pan reached at the last iteration is q_p. The vector s = [q1 … qr] and the distance go
 to the distance learner. This module builds the four parts from a composed config and runs
 presentations; `parallax.trainer` adds the schedule, metrics, logging and checkpoints, and
-`parallax.evaluate` the frozen measurements.
+`parallax.tools.evaluate` the frozen measurements.
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ class Experiment:
         # µs on images this small, and between them its worker thread spun: 0.8–0.9 ms of CPU per
         # step at B = 1 (per-thread CPU times, two runs each way), taken from the threads that
         # render and encode. Without workers the calls run here; their results are the same
-        # (tests/test_coding_retina.py).
+        # (tests/coding/test_retina.py).
         cv2.setNumThreads(0)
         self.lateral_positions = [float(l) for l in cfg.curriculum.lateral_positions]
         stages = cfg.curriculum.get("stages") or [self.lateral_positions]

@@ -149,7 +149,7 @@ class Trainer:
             "mae": self.eye.mae(),
             "mae_per_position": self.eye.mae_per_position(),
             "mae_recent": self.eye.recent_mae(int(self.cfg.metrics.summary_trials)),
-            # Tables 2–3's window per position, for python -m parallax.time_to_learn
+            # Tables 2–3's window per position, for python -m parallax.tools.analysis.time_to_learn
             "mae_recent_per_position": {
                 k: v["mean"]
                 for k, v in self.eye.last_trials(int(self.cfg.metrics.summary_trials)).items()

@@ -12,7 +12,7 @@ import torch
 
 from parallax.coding import MultiScaleCoder
 from parallax.distance import DistanceLearner
-from parallax.distance.synthetic import PAPER_LATERAL_POSITIONS_M, paper_regression
+from parallax.tools.analysis.synthetic_pans import PAPER_LATERAL_POSITIONS_M, paper_regression
 from parallax.policy.natural_actor_critic import NaturalActorCritic
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
@@ -130,7 +130,7 @@ def test_a_run_on_the_gpu_trains_resumes_exactly_and_evaluates_on_the_cpu(
     tmp_path, tiny_overrides
 ) -> None:
     from parallax.config import compose
-    from parallax.evaluate import main as evaluate
+    from parallax.tools.evaluate import main as evaluate
     from parallax.trainer import Trainer
 
     def train(run_dir, extra=()) -> dict:

@@ -87,7 +87,7 @@ def test_experiment_files_compose_and_validate(experiment):
 
 
 def test_paper_experiments_cover_tables_2_to_5():
-    from parallax import paper_results as paper
+    from parallax.tools.report import paper_results as paper
     from parallax.metrics import position_label
 
     lists = {}

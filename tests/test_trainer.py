@@ -138,7 +138,7 @@ def test_the_start_jitter_ends_after_start_jitter_presentations(tmp_path, tiny_o
     assert all(-1.0 <= p <= 1.0 for p in jittered) and len(set(jittered)) == len(jittered)
     assert all(p == 0.0 for r in records[4:] for p in r["start_pans"][0])  # the paper's start
     # parallax-eval starts its trials as the end of training did, unless told otherwise
-    from parallax.evaluate import evaluate
+    from parallax.tools.evaluate import evaluate
 
     assert (
         evaluate(tmp_path, distances=[3.0], between=[], out=tmp_path / "e1")["start_jitter"]
@@ -155,7 +155,7 @@ def test_the_start_jitter_ends_after_start_jitter_presentations(tmp_path, tiny_o
 
 
 def test_mae_by_start_splits_trials_by_the_side_they_started_on():
-    from parallax.evaluate import mae_by_start
+    from parallax.tools.evaluate import mae_by_start
 
     # α* = +1° (first robot) and −1° (second, the mirror case); each starts past once and short once
     run = {
@@ -221,7 +221,7 @@ def test_perturbation_switches_on_mid_run(tmp_path, tiny_overrides):
     assert [r["perturbed"] for r in records] == [False, False, False, True, True, True]
     assert summary["before_perturbation"]["presentations"] == 3
     assert (tmp_path / "checkpoint_before_perturbation.pt").is_file()
-    from parallax.evaluate import evaluate
+    from parallax.tools.evaluate import evaluate
 
     before = evaluate(
         tmp_path,
@@ -250,7 +250,7 @@ def test_staged_curriculum_widens_the_list(tmp_path, tiny_overrides):
 
 
 def test_eval_writes_json_and_figures(tmp_path, tiny_overrides):
-    from parallax.evaluate import evaluate
+    from parallax.tools.evaluate import evaluate
 
     _train(tmp_path, tiny_overrides)
     result = evaluate(tmp_path, distances=[3.0, 6.5, 10.0], between=[4.25])

@@ -1,7 +1,7 @@
 """Sensory coding model (paper §3.3, eqs. 1–6, Fig. 5): retina, matching pursuit, dictionaries.
 
 ``MultiScaleCoder`` is what the trainer instantiates from ``conf/coder/``; the other names are
-its parts, exported for tests, notebooks and the benchmark (``parallax.coding.benchmark``).
+its parts, exported for tests, notebooks and the benchmark (``parallax.tools.bench.coding``).
 """
 
 from .atoms import atom_grid, save_png

@@ -8,7 +8,7 @@ reference patch of I0 stacked over the patch of I(t), K = 2·10·10 = 200 elemen
 Tensors in, tensors out, on the dictionaries' device. On the CPU the grey conversion and the
 pyramid call OpenCV (``cvtColor``, ``pyrDown``: tens of µs where the torch convolution takes
 half a millisecond); elsewhere a torch copy of ``pyrDown`` (5-tap binomial kernel,
-BORDER_REFLECT_101, output size ⌈n/2⌉) runs; ``tests/test_coding_retina.py`` checks that both
+BORDER_REFLECT_101, output size ⌈n/2⌉) runs; ``tests/coding/test_retina.py`` checks that both
 agree with OpenCV.
 
 Normalisation (``"per_half"`` or ``"joint"``):

@@ -221,9 +221,7 @@ class DistanceLearner:
             outliers=float(self.queue.fill - targets.numel()),
         )
 
-    def predict(
-        self, S: Tensor | np.ndarray | Sequence[Sequence[float]]
-    ) -> Tensor | np.ndarray:
+    def predict(self, S: Tensor | np.ndarray | Sequence[Sequence[float]]) -> Tensor | np.ndarray:
         """(n, r) pans in degrees → (n,) metres (or (r,) → a scalar), weighted as in training.
 
         Returns a float64 tensor for a tensor input, a NumPy array otherwise.

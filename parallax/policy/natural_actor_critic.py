@@ -207,7 +207,7 @@ class NaturalActorCritic(nn.Module):
         position, so one linear weight can tell "turned further than any plausible target"
         wherever the robot stands. A linear policy on pooled activities alone cannot: once the
         image pair no longer overlaps, a pan past the target and one short of it look alike
-        (``python -m parallax.landscape … --span 4``). ν is 0 at l = 0, where no pan is implied.
+        (``python -m parallax.tools.analysis.landscape … --span 4``). ν is 0 at l = 0, where no pan is implied.
         """
         pan = torch.as_tensor(pan_deg, dtype=self.actor.dtype, device=self.actor.device).reshape(
             -1, 1
@@ -230,7 +230,7 @@ class NaturalActorCritic(nn.Module):
 
         Beyond the paper. g = clip(gain · (r_t − r_{t−1}) / |r_{t−1}| · sign(a_{t−1}), −1, 1): > 0
         when turning left (a > 0) helped or turning right hurt, < 0 the other way, 0 after a
-        zero step. The reward −(e_C + e_F) peaks at α* on both sides (``parallax.landscape``),
+        zero step. The reward −(e_C + e_F) peaks at α* on both sides (``parallax.tools.analysis.landscape``),
         so g says on which side of the peak the eye is, which the pooled activities do not once
         the image pair no longer overlaps: past the target the eye kept turning (runaways,
         docs/results/beyond_the_paper.md). One weight per action can then say "go back where the

@@ -1,0 +1,1 @@
+"""`parallax-bench`: where the time of one step goes, per component and end to end."""

@@ -1,0 +1,443 @@
+"""`parallax-bench`: where the time of one environment step goes, and how far it is from the limit.
+
+Prints a readable table and writes JSON of
+- median times per component (the world's render and step, the retina, the encoding of both
+  scales and the dictionary update, the policy's act + update, one Levenberg–Marquardt epoch),
+  from each sub-package's ``benchmark.run``;
+- end-to-end environment steps per second (robot-iterations per second) for B = 1 and B = 16
+  robots in lockstep, on the CPU (and CUDA when present);
+- the roofline of this machine for one step of the coder: its floating-point work and memory
+  traffic divided by the measured matmul throughput and memory bandwidth;
+- where the whole step's time goes on the CPU: the process's CPU time per robot-iteration, how
+  many cores it kept busy, and the rate if every core were busy (what scheduling could give);
+- the step's ceiling on this machine: the coder at its roofline bound, every frame at the CPU
+  cost of a render measured alone, and every core busy — the most any schedule can give.
+
+Everything is measured in the same run, so ratios are comparable even on a shared machine;
+medians, never means. ``--threads`` sets torch's intra-op threads; the step also runs the world
+on the GL thread and the coder's second scale on a helper thread whatever it is (README, Speed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import statistics
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import torch
+
+from parallax.config import compose
+from parallax.tools.bench.timing import interleaved_medians_ms
+
+
+# --- the machine's limits ----------------------------------------------------------------------
+def _synchronised(operation, device: str):
+    """``operation`` followed by a wait for the device, so host clocks time the device's work."""
+    if device == "cpu":
+        return operation
+    return lambda: (operation(), torch.cuda.synchronize())
+
+
+def machine_limits(threads: int, device: str = "cpu") -> dict[str, float]:
+    """Measured float32 matmul throughput (GFLOP/s) and copy bandwidth (GB/s) of ``device``
+    (the CPU at ``threads`` torch threads, or the GPU; full float32, TF32 off)."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    previous_tf32 = torch.backends.cuda.matmul.allow_tf32
+    torch.backends.cuda.matmul.allow_tf32 = False  # the coder's products are plain float32
+    try:
+        n = 1024 if device == "cpu" else 8192
+        a, b = torch.randn(n, n, device=device), torch.randn(n, n, device=device)
+        out = torch.empty(n, n, device=device)
+        mm = _synchronised(lambda: torch.mm(a, b, out=out), device)
+        ms = interleaved_medians_ms({"mm": mm}, repeats=20)["mm"]
+        gflops = 2 * n**3 / (ms * 1e-3) / 1e9
+        # 128 MiB on the CPU, 2 GiB on a GPU: far beyond the caches
+        src = torch.ones((32 if device == "cpu" else 512) * 2**20, device=device)
+        dst = torch.empty_like(src)
+        copy = _synchronised(lambda: dst.copy_(src), device)
+        ms = interleaved_medians_ms({"copy": copy}, repeats=10)["copy"]
+        gbps = 2 * src.numel() * 4 / (ms * 1e-3) / 1e9  # one read + one write per element
+    finally:
+        torch.set_num_threads(previous)
+        torch.backends.cuda.matmul.allow_tf32 = previous_tf32
+    return {"matmul_gflops": gflops, "copy_gbps": gbps}
+
+
+def cuda_components(repeats: int) -> dict[str, float]:
+    """Median ms of the coder (encode + dictionary update, both scales), the policy's act +
+    update and one LM epoch on the GPU, each followed by a device synchronisation."""
+    from parallax.tools.bench.coding import _coder, _frames
+    from parallax.tools.bench.distance import EpochFromStart, _paper_sized_learner
+    from parallax.tools.bench.policy import NUM_SCALES, STATE_DIM, _pooled_activities
+    from parallax.policy.natural_actor_critic import NaturalActorCritic
+
+    operations = {}
+    for batch in (1, 16, 64):
+        references, currents = _frames(batch)
+        coder = _coder("gram", True, ["coarse", "fine"]).to("cuda")
+        coder.set_reference(references)
+        current = torch.from_numpy(currents).to("cuda")
+        operations[f"encode_update_both_B{batch}_ms"] = _synchronised(
+            lambda coder=coder, current=current: coder(current), "cuda"
+        )
+    for batch in (1, 16, 64):
+        policy = NaturalActorCritic(STATE_DIM, NUM_SCALES, seed=0).to("cuda")
+        generator = torch.Generator().manual_seed(0)
+        states = _pooled_activities(batch, generator).to("cuda")
+        rewards = -torch.rand(batch, generator=generator).to("cuda")
+        valid = torch.ones(batch, dtype=torch.bool, device="cuda")
+
+        def act_update(policy=policy, states=states, rewards=rewards, valid=valid) -> None:
+            action = policy.act(states)
+            policy.update(states, action, rewards, states, valid)
+
+        operations[f"policy_act_update_B{batch}_ms"] = _synchronised(act_update, "cuda")
+    timed = EpochFromStart(_paper_sized_learner().to("cuda"))
+    operations["lm_epoch_ms"] = _synchronised(lambda: (timed.restore(), timed.epoch()), "cuda")
+    return interleaved_medians_ms(operations, repeats, warmup=5)
+
+
+def coder_work_per_frame(cfg) -> dict[str, float]:
+    """Floating-point operations and bytes moved by the coder for one frame pair (all scales).
+
+    Counted as the coder computes them: correlations X·Φᵀ (2PKN), the Gram matrix ΦΦᵀ (2N²K),
+    k steps of C ← C − c·G[j] (2kPN), the reconstruction from the k picks (2PkK), the sparse
+    dictionary gradient Bᵀ·R from the picks (2PkK) and the pooled activities from the picks
+    (2Pk). Bytes: the patches and the dictionary read about three times, the Gram matrix once,
+    the correlation matrix read and written at each of the k steps (the dense (P, N) codes are
+    not made: θ comes from the picks).
+
+    ``shared_flops`` and ``shared_bytes`` are the part a lockstep of B robots does once, not B
+    times: the Gram matrix and the reads of the dictionary and the Gram matrix (one dictionary
+    per scale, all robots' patches in one pursuit); see :func:`coder_bound_ms`.
+    """
+    from parallax.coding.retina import ScaleSpec
+
+    flops = bytes_moved = shared_flops = shared_bytes = 0.0
+    N, k = int(cfg.coder.atoms), int(cfg.coder.sparsity)
+    for scale in cfg.coder.scales:
+        spec = cfg.coder.scale_specs[scale]
+        geometry = ScaleSpec.from_mapping(scale, spec)
+        P, K = geometry.patch_count, geometry.dim
+        flops += 2 * P * K * N + 2 * N * N * K + 2 * k * P * N + 4 * P * k * K + 2 * P * k
+        bytes_moved += 4 * (3 * P * K + 3 * N * K + N * N + 2 * (k + 1) * P * N)
+        shared_flops += 2 * N * N * K
+        shared_bytes += 4 * (3 * N * K + N * N)
+    return {
+        "flops": flops,
+        "bytes": bytes_moved,
+        "shared_flops": shared_flops,
+        "shared_bytes": shared_bytes,
+    }
+
+
+def coder_bound_ms(work: dict[str, float], limits: dict[str, float], robots: int) -> float:
+    """The coder's roofline bound for one lockstep of ``robots`` frames (ms): its work divided by
+    the measured matmul throughput, or its traffic by the copy bandwidth, whichever is longer.
+    The Gram matrix and the dictionary reads are counted once per lockstep, not per robot."""
+    flops = robots * (work["flops"] - work["shared_flops"]) + work["shared_flops"]
+    bytes_moved = robots * (work["bytes"] - work["shared_bytes"]) + work["shared_bytes"]
+    return (
+        max(flops / (limits["matmul_gflops"] * 1e9), bytes_moved / (limits["copy_gbps"] * 1e9))
+        * 1e3
+    )
+
+
+# --- the whole step's ceiling --------------------------------------------------------------------
+def usable_cores() -> int:
+    """CPU cores this process may run on (its affinity, which a cluster job may narrow)."""
+    return len(os.sched_getaffinity(0))
+
+
+def render_cpu_ms_per_frame(frames: int = 200) -> float:
+    """CPU milliseconds one 256×256 left-eye frame costs, rendered alone: the process's CPU time
+    (the GL thread, Mesa's rasteriser threads, everything) over ``frames`` frames, after a warm-up.
+    No roofline exists for the renderer, so this measured cost is the step's floor for it."""
+    import parallax.envs
+
+    env = parallax.envs.load(seed=0, lateral_positions=[0.05, 0.1], trial_length=30, image_size=256)
+    try:
+        env.reset()
+        for _ in range(20):
+            env.physics.render_left_eye()
+        start = time.process_time()
+        for _ in range(frames):
+            env.physics.render_left_eye()
+        return (time.process_time() - start) / frames * 1e3
+    finally:
+        env.close()
+
+
+def ceiling_steps_per_second(
+    render_cpu_ms: float, coder_bound: float, robots: int, cores: int
+) -> float:
+    """Robot-iterations per second if the coder ran at its roofline bound (``coder_bound``, ms
+    for a lockstep of ``robots``), every frame cost ``render_cpu_ms`` of CPU and ``cores`` cores
+    were busy all the time, with nothing else to do: the most this machine can give."""
+    return cores * robots / (robots * render_cpu_ms + coder_bound) * 1e3
+
+
+# --- end to end ----------------------------------------------------------------------------------
+def end_to_end(
+    robots: Sequence[int], presentations: int, device: str, overrides: list[str]
+) -> dict[str, dict[str, float]]:
+    """Robot-iterations per second of the whole loop for each B in ``robots``, twice: the
+    experiment's presentation alone (render → retina → encode → policy → dictionary update) and
+    the trainer's whole step, which adds the distance learner's online prediction and fit (§3.5)
+    and the metrics. The learner's queue is filled with synthetic vectors first, so that every s
+    triggers a fit of full size.
+
+    The cases take turns, one presentation each per round, so that every B sees the same machine:
+    on a shared machine the speed moves by tens of per cent within minutes."""
+    import tempfile
+
+    import numpy as np
+
+    from parallax.tools.analysis.synthetic_pans import paper_regression
+    from parallax.trainer import Trainer
+
+    with contextlib.ExitStack() as stack:
+        trainers = {}
+        for b in robots:
+            trainer = Trainer(
+                compose([f"env.robots={b}", f"device={device}", *overrides]),
+                stack.enter_context(tempfile.TemporaryDirectory()),
+            )
+            stack.callback(trainer.exp.close)
+            learner = trainer.exp.distance
+            pans, distances = paper_regression(
+                learner.queue.capacity,
+                np.random.default_rng(0),
+                lateral_positions_m=trainer.exp.lateral_positions,
+            )
+            learner.observe_batch(pans, distances)  # the first, long fit happens here, untimed
+            trainer.step_presentation(keep_view=False)  # warm-up: first calls allocate and compile
+            trainers[b] = trainer
+        samples = {
+            b: {"rates": [], "step_ms": [], "trainer_rates": [], "cpu_ms": []} for b in robots
+        }
+        for _ in range(presentations):
+            for b, trainer in trainers.items():
+                timed = samples[b]
+                t, cpu = time.perf_counter(), time.process_time()
+                pres = trainer.exp.run_presentation()
+                dt, cpu = time.perf_counter() - t, time.process_time() - cpu
+                timed["rates"].append(pres.steps * b / dt)
+                timed["step_ms"].append(dt / pres.steps * 1e3)
+                timed["cpu_ms"].append(cpu / (pres.steps * b) * 1e3)
+                t = time.perf_counter()
+                pres, _ = trainer.step_presentation(keep_view=False)
+                timed["trainer_rates"].append(pres.steps * b / (time.perf_counter() - t))
+    cores = usable_cores()
+    results = {}
+    for b, timed in samples.items():
+        rates, cpu_ms = timed["rates"], timed["cpu_ms"]
+        cpu_per_iteration = statistics.median(cpu_ms)
+        results[f"B={b}"] = {
+            "steps_per_second": statistics.median(rates),
+            "lockstep_ms": statistics.median(timed["step_ms"]),
+            "steps_per_second_min": min(rates),
+            "steps_per_second_max": max(rates),
+            "trainer_steps_per_second": statistics.median(timed["trainer_rates"]),
+            # CPU time of every thread of the process (GL, Mesa's rasterisers, the coder's helper)
+            "cpu_ms_per_robot_iteration": cpu_per_iteration,
+            "busy_cores": statistics.median(rate * c / 1e3 for rate, c in zip(rates, cpu_ms)),
+            "cores": cores,
+            # the same work with every core busy all the time: what scheduling could still give
+            "steps_per_second_all_cores_busy": cores / cpu_per_iteration * 1e3,
+        }
+    return results
+
+
+def run(
+    repeats: int = 30,
+    presentations: int = 3,
+    robots: tuple[int, ...] = (1, 16),
+    threads: int = 1,
+    components: bool = True,
+) -> dict:
+    torch.set_num_threads(threads)
+    report: dict = {
+        "threads": threads,
+        "torch": torch.__version__,
+        "cuda": torch.cuda.is_available(),
+    }
+    if components:
+        from parallax.tools.bench import coding as coding_bench
+        from parallax.tools.bench import distance as distance_bench
+        from parallax.tools.bench import envs as envs_bench
+        from parallax.tools.bench import policy as policy_bench
+
+        report["components_ms"] = {
+            "world": envs_bench.run(repeats),
+            "coder": coding_bench.run(repeats),
+            "policy": policy_bench.run(repeats),
+            "distance": distance_bench.run(max(5, repeats // 3)),
+        }
+        if torch.cuda.is_available():
+            report["components_ms"]["cuda"] = cuda_components(repeats)
+        torch.set_num_threads(threads)  # component benchmarks may change it
+    # A short multi-position curriculum: 6 positions × 30 iterations per presentation.
+    overrides = ["curriculum=multi_5_10", f"train.threads={threads}"]
+    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    report["end_to_end"] = {
+        dev: end_to_end(robots, presentations, dev, overrides) for dev in devices
+    }
+    cfg = compose(overrides)
+    work = coder_work_per_frame(cfg)
+    report["roofline"] = {}
+    for dev in devices:
+        limits = machine_limits(threads, dev)
+        report["roofline"][dev] = {
+            **limits,
+            **work,
+            "coder_bound_ms_per_frame": coder_bound_ms(work, limits, 1),
+            "coder_bound_ms_B16": coder_bound_ms(work, limits, 16),
+        }
+    rf = report["roofline"]["cpu"]
+    coder = report.get("components_ms", {}).get("coder", {})
+    # What the coder runs by default, and each Gram-form implementation (compiled kernels and
+    # the numpy/torch fallback) measured beside it.
+    for key, name in (
+        ("coder_measured_over_bound", "encode_update_both_B1_gram_ms"),
+        ("coder_cpp_measured_over_bound", "encode_update_both_B1_gram_cpp_ms"),
+        ("coder_torch_measured_over_bound", "encode_update_both_B1_gram_torch_ms"),
+    ):
+        if coder.get(name):
+            rf[key] = coder[name] / rf["coder_bound_ms_per_frame"]
+    if coder.get("encode_update_both_B16_gram_ms"):
+        rf["coder_B16_measured_over_bound"] = (
+            coder["encode_update_both_B16_gram_ms"] / rf["coder_bound_ms_B16"]
+        )
+    on_gpu = report.get("components_ms", {}).get("cuda", {})
+    for batch in (1, 16, 64):
+        if on_gpu.get(f"encode_update_both_B{batch}_ms"):
+            report["roofline"]["cuda"][f"coder_B{batch}_measured_over_bound"] = on_gpu[
+                f"encode_update_both_B{batch}_ms"
+            ] / coder_bound_ms(work, report["roofline"]["cuda"], batch)
+    for dev, by_b in report["end_to_end"].items():
+        for b, r in by_b.items():
+            r["coder_bound_ms"] = coder_bound_ms(
+                work, report["roofline"][dev], int(b.split("=")[1])
+            )
+            r["step_over_coder_bound"] = r["lockstep_ms"] / r["coder_bound_ms"]
+    cores, render_ms = usable_cores(), render_cpu_ms_per_frame()
+    report["ceiling"] = {"cpu": {"cores": cores, "render_cpu_ms_per_frame": render_ms}}
+    for b, r in report["end_to_end"]["cpu"].items():
+        ceiling = ceiling_steps_per_second(
+            render_ms, r["coder_bound_ms"], int(b.split("=")[1]), cores
+        )
+        report["ceiling"]["cpu"][b] = {
+            "steps_per_second": ceiling,
+            "measured_over_ceiling": r["steps_per_second"] / ceiling,
+        }
+    return report
+
+
+def format_report(report: dict) -> str:
+    lines = [
+        f"parallax-bench — torch {report['torch']}, {report['threads']} thread(s), "
+        f"CUDA {'yes' if report['cuda'] else 'no'}"
+    ]
+    for group, figures in report.get("components_ms", {}).items():
+        lines.append(f"[{group}]")
+        for name, value in figures.items():
+            lines.append(f"  {name:<48} {value:>10.3f}")
+    lines.append(
+        "[end to end] robot-iterations per second (median over presentations; the cases take turns)"
+    )
+    for dev, by_b in report["end_to_end"].items():
+        for b, r in by_b.items():
+            lines.append(
+                f"  {dev} {b:<6} {r['steps_per_second']:>8.1f} steps/s   "
+                f"lockstep {r['lockstep_ms']:.2f} ms   ×{r['step_over_coder_bound']:.1f} of the coder bound   "
+                f"with the distance learner {r['trainer_steps_per_second']:.1f} steps/s"
+            )
+    for dev, by_b in report["end_to_end"].items():
+        for b, r in by_b.items():
+            if "cpu_ms_per_robot_iteration" in r:
+                lines.append(
+                    f"  {dev} {b:<6} range {r['steps_per_second_min']:.1f}–{r['steps_per_second_max']:.1f} steps/s;  "
+                    f"{r['cpu_ms_per_robot_iteration']:.2f} ms of CPU per robot-iteration, "
+                    f"{r['busy_cores']:.2f} cores busy → {r['steps_per_second_all_cores_busy']:.1f} "
+                    f"steps/s if all {r['cores']} were"
+                )
+    for dev, rf in report["roofline"].items():
+        lines.append(
+            f"[roofline {dev}] matmul {rf['matmul_gflops']:.1f} GFLOP/s, copy {rf['copy_gbps']:.1f} GB/s; "
+            f"coder per frame {rf['flops'] / 1e6:.1f} MFLOP, {rf['bytes'] / 1e6:.1f} MB "
+            f"→ bound {rf['coder_bound_ms_per_frame']:.4f} ms; a lockstep of 16 robots "
+            f"{rf['coder_bound_ms_B16']:.3f} ms (the Gram matrix and dictionary reads once)"
+        )
+        if "coder_measured_over_bound" in rf:
+            variants = [
+                f"{label} ×{rf[key]:.1f}"
+                for key, label in (
+                    ("coder_cpp_measured_over_bound", "compiled kernels"),
+                    ("coder_torch_measured_over_bound", "numpy/torch loop"),
+                )
+                if key in rf
+            ]
+            lines.append(
+                f"  coder measured / bound: ×{rf['coder_measured_over_bound']:.1f}"
+                + (f" ({', '.join(variants)})" if variants else "")
+            )
+        gpu = [
+            f"B={b} ×{rf[f'coder_B{b}_measured_over_bound']:.1f}"
+            for b in (1, 16, 64)
+            if f"coder_B{b}_measured_over_bound" in rf
+        ]
+        if gpu:
+            lines.append(f"  coder measured / bound, by robots in the lockstep: {', '.join(gpu)}")
+    if "ceiling" in report:
+        top = report["ceiling"]["cpu"]
+        lines.append(
+            f"[ceiling cpu] {top['cores']} cores; a left-eye frame costs {top['render_cpu_ms_per_frame']:.2f} ms "
+            "of CPU to render alone; with the coder at its roofline bound and every core busy:"
+        )
+        for b, c in top.items():
+            if b.startswith("B="):
+                lines.append(
+                    f"  {b:<6} ≤ {c['steps_per_second']:.1f} robot-iterations/s "
+                    f"(measured: {c['measured_over_ceiling']:.0%} of it)"
+                )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="parallax-bench", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--repeats", type=int, default=30, help="timed repeats per component")
+    parser.add_argument(
+        "--presentations", type=int, default=3, help="timed presentations per end-to-end case"
+    )
+    parser.add_argument(
+        "--robots", type=int, nargs="+", default=[1, 16], help="B values end to end"
+    )
+    parser.add_argument("--threads", type=int, default=1, help="torch threads")
+    parser.add_argument("--no-components", action="store_true", help="end to end and roofline only")
+    parser.add_argument("--json", default=None, help="also write the report to this file")
+    args = parser.parse_args(argv)
+    if args.repeats < 1 or args.presentations < 1 or min(args.robots) < 1 or args.threads < 1:
+        print(
+            "parallax-bench: error: --repeats, --presentations, --robots and --threads must be ≥ 1",
+            file=sys.stderr,
+        )
+        sys.exit(2)
+    robots = tuple(dict.fromkeys(args.robots))  # each B once, in the order given
+    report = run(args.repeats, args.presentations, robots, args.threads, not args.no_components)
+    print(format_report(report))
+    text = json.dumps(report, indent=2)
+    if args.json:
+        Path(args.json).write_text(text + "\n")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,358 @@
+"""`parallax-eval <run dir>`: frozen measurements of a trained run (paper §4.2, §6; Tables 2–5).
+
+Learning is switched off (dictionaries, policy and distance learner frozen). The robot is shown
+held-out textures (photographs never used in training) at every distance of the grid — and,
+beyond the paper, at distances between the grid points — and we measure:
+
+- eye-movement MAE per lateral position, |q_p − α*| at the last iteration of each trial, with the
+  greedy policy (argmax) and with the sampled policy;
+- the distance error per range 3–4.9, 5–6.9, 7–10 m and total (Tables 4–5), from s of the
+  greedy policy.
+
+Trials start as the run's last training presentations did (pan 0 as in the paper, or a random
+pan with ``env.initial_pan_jitter_deg…``); ``--start-jitter on|off`` chooses.
+
+Writes `eval.json` and figures (`eval_mae_per_position.png`, `eval_error_vs_distance.png`,
+`mae_curves.png`) into the run directory (or --out).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from parallax import checkpoint
+from parallax.tools import plots
+from parallax.config import (
+    DISTANCE_READOUTS,
+    READOUT_PANS,
+    distance_readout,
+    load_run_config,
+    perturbation_start,
+    start_jitter_on,
+)
+from parallax.experiment import Experiment
+from parallax.metrics import position_label
+
+
+def grid(start: float, stop: float, step: float) -> list[float]:
+    n = int(round((stop - start) / step)) + 1
+    return [round(start + i * step, 6) for i in range(n)]
+
+
+def run_jobs(
+    exp: Experiment, jobs: list[tuple[float, int]], greedy: bool, readout: str = "last"
+) -> dict[str, np.ndarray]:
+    """Run one frozen presentation per (distance, texture) job, B robots at a time."""
+    pans, targets, dists, starts = [], [], [], []
+    B = exp.robots
+    for start in range(0, len(jobs), B):
+        batch = jobs[start : start + B]
+        padded = batch + [batch[-1]] * (B - len(batch))  # idle robots repeat the last job
+        for env, (d, tex) in zip(exp.envs, padded):
+            env.task.set_next_stimulus(texture_index=tex, distance=d)
+        pres = exp.run_presentation(learn=False, greedy=greedy)
+        pans.append(getattr(pres, READOUT_PANS[readout])[: len(batch)])
+        targets.append(pres.targets[: len(batch)])
+        dists.append(pres.distances[: len(batch)])
+        starts.append(pres.start_pans[: len(batch)])
+    return {
+        "pans": np.concatenate(pans),
+        "targets": np.concatenate(targets),
+        "distances": np.concatenate(dists),
+        "start_pans": np.concatenate(starts),
+    }
+
+
+def mae_by_start(run: dict[str, np.ndarray]) -> dict[str, float]:
+    """Eye MAE of the trials that started short of α* or on it (the paper's start at pan 0 always
+    does) and of those that started past it (only a random start can), with the share of the latter."""
+    err = np.abs(run["pans"] - run["targets"])
+    past = (run["start_pans"] - run["targets"]) * np.sign(run["targets"]) > 0
+    out = {"share_started_past": float(past.mean())}
+    for name, mask in (("started_short", ~past), ("started_past", past)):
+        out[name] = float(err[mask].mean()) if mask.any() else float("nan")
+    return out
+
+
+def distance_results(learner, pans: np.ndarray, distances: np.ndarray) -> dict:
+    """Errors by range and per distance of ``learner`` on the eye-movement vectors ``pans``; the
+    vectors themselves are kept ("samples") so that parallax-replay can score other learners on
+    exactly the same eye movements."""
+    from parallax.distance.metrics import distance_error_by_range
+
+    pred = np.asarray(learner.predict(np.asarray(pans)), dtype=np.float64).reshape(-1)
+    true = np.asarray(distances, dtype=np.float64)
+    rel = np.abs(pred - true) / true * 100.0
+    per_distance = {}
+    for d in np.unique(true):
+        per_distance[f"{d:.2f}"] = float(rel[true == d].mean())
+    return {
+        "by_range": distance_error_by_range(pred, true),
+        "per_distance": per_distance,
+        "samples": {"pans": np.asarray(pans).tolist(), "distances": true.tolist()},
+    }
+
+
+def evaluate(
+    run_dir: str | Path,
+    textures: int = 1,
+    distances: list[float] | None = None,
+    between: list[float] | None = None,
+    perturbation: str = "auto",
+    out: str | Path | None = None,
+    checkpoint_name: str = checkpoint.CHECKPOINT_NAME,
+    device: str | None = None,
+    readout: str | None = None,
+    start_jitter: str = "auto",
+) -> dict:
+    if start_jitter not in ("auto", "on", "off"):
+        raise ValueError(f"--start-jitter must be auto, on or off, got {start_jitter!r}")
+    if readout is not None and readout not in DISTANCE_READOUTS:
+        raise ValueError(
+            f"--readout must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}"
+        )
+    run_dir = Path(run_dir)
+    out_dir = Path(out) if out else run_dir
+    cfg = load_run_config(run_dir)
+    readout = readout or distance_readout(cfg)  # by default, s as the run's distance learner saw it
+    if device is not None:  # e.g. a run trained on a GPU, evaluated on a machine without one
+        if device != "cpu" and not (device == "cuda" or device.startswith("cuda:")):
+            raise ValueError(f"--device must be cpu or cuda, got {device!r}")
+        cfg.device = device
+    if str(cfg.device).startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(
+            f"the run was trained with device={cfg.device} and torch sees no CUDA device here; "
+            "pass --device cpu"
+        )
+    if int(cfg.train.threads) > 0:
+        # as in training: a second intra-op thread made a loaded 2-core machine ~30× slower
+        torch.set_num_threads(int(cfg.train.threads))
+    ckpt_path = run_dir / checkpoint_name
+    if not ckpt_path.is_file():
+        raise FileNotFoundError(f"{run_dir} has no {checkpoint_name}: nothing to evaluate")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    state = checkpoint.load(ckpt_path)
+    exp = Experiment(cfg, stimuli_split="heldout")
+    try:
+        exp.load_state_dict(state["experiment"])
+        exp.set_stage(len(exp.stages) - 1)
+        start = perturbation_start(cfg)
+        # Perturbed once a presentation ran after the switch (a checkpoint taken at the switch
+        # holds the learnt state from before it).
+        was_perturbed = start is not None and state["presentation"] > start
+        perturbed = {"auto": was_perturbed, "on": True, "off": False}[perturbation]
+        exp.set_perturbation(perturbed)
+        # auto: trials start as the checkpoint's last training presentations did (jittered or 0)
+        jittered = {
+            "auto": start_jitter_on(cfg, max(0, int(state["presentation"]) - 1)),
+            "on": True,
+            "off": False,
+        }[start_jitter]
+        exp.set_start_jitter(jittered)
+        if not exp.distance.is_ready:
+            print(
+                "[parallax-eval] the distance learner never trained (queue not full): "
+                "distance errors are left out",
+                file=sys.stderr,
+            )
+        n_tex = exp.envs[0].task.num_textures
+        if textures < 1 or textures > n_tex:
+            raise ValueError(
+                f"--textures must be between 1 and {n_tex} (held-out textures), got {textures}"
+            )
+        distances = distances or grid(3.0, 10.0, 0.1)
+        jobs = [
+            (d, (i * textures + k) % n_tex)
+            for i, d in enumerate(distances)
+            for k in range(textures)
+        ]
+        labels = [position_label(l) for l in exp.lateral_positions]
+        result: dict = {
+            "run_dir": str(run_dir),
+            "checkpoint": checkpoint_name,
+            "presentations": int(state["presentation"]),
+            "readout": readout,
+            "perturbed": perturbed,
+            "start_jitter": jittered,
+            "textures_per_distance": textures,
+            "lateral_positions_cm": labels,
+            "mae_per_position": {},
+            "mae": {},
+        }
+        runs = {}
+        for mode, greedy in (("greedy", True), ("sampled", False)):
+            runs[mode] = run = run_jobs(exp, jobs, greedy, readout)
+            err = np.abs(run["pans"] - run["targets"])
+            result["mae_per_position"][mode] = {
+                k: float(v) for k, v in zip(labels, err.mean(axis=0))
+            }
+            result["mae"][mode] = float(err.mean())
+            result.setdefault("mae_by_start", {})[mode] = mae_by_start(run)
+        between_run = None
+        if between:
+            between_jobs = [(d, i % n_tex) for i, d in enumerate(between)]
+            between_run = run_jobs(exp, between_jobs, True, readout)
+        # The greedy eye's vectors s, kept whether or not this run's learner is ready, so that
+        # parallax-replay can score other distance learners on exactly these eye movements.
+        result["greedy_samples"] = {
+            "grid": {
+                "pans": runs["greedy"]["pans"].tolist(),
+                "distances": runs["greedy"]["distances"].tolist(),
+            }
+        }
+        if between_run is not None:
+            result["greedy_samples"]["between"] = {
+                "pans": between_run["pans"].tolist(),
+                "distances": between_run["distances"].tolist(),
+            }
+        curves = {}
+        if exp.distance.is_ready:
+            result["distance"] = distance_results(
+                exp.distance, runs["greedy"]["pans"], runs["greedy"]["distances"]
+            )
+            pd = result["distance"]["per_distance"]
+            curves["grid (held-out textures)"] = ([float(k) for k in pd], list(pd.values()))
+            if between_run is not None:
+                result["distance_between_grid"] = distance_results(
+                    exp.distance, between_run["pans"], between_run["distances"]
+                )
+                pb = result["distance_between_grid"]["per_distance"]
+                curves["between grid points"] = ([float(k) for k in pb], list(pb.values()))
+    finally:
+        exp.close()
+
+    plots.mae_per_position(result["mae_per_position"], out_dir / "eval_mae_per_position.png")
+    if curves:
+        plots.error_vs_distance(curves, out_dir / "eval_error_vs_distance.png")
+    metrics_path = run_dir / "metrics.jsonl"
+    if metrics_path.is_file():
+        records = [
+            json.loads(line) for line in metrics_path.read_text().splitlines() if line.strip()
+        ]
+        first = next((i for i, r in enumerate(records) if r.get("perturbed")), None)
+        switch = None if first is None else (records[first - 1]["steps"] if first else 0)
+        if records:
+            plots.mae_curves(records, out_dir / "mae_curves.png", perturbation_at=switch)
+    (out_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
+    return result
+
+
+def format_eval(result: dict) -> str:
+    lines = (
+        []
+        if result.get("readout", "last") == "last"
+        else [
+            f"readout: {result['readout']} (each trial's pan where the coder's reward was highest)"
+        ]
+    )
+    lines.append(f"{'position (cm)':>14} {'greedy MAE':>11} {'sampled MAE':>12}")
+    for k in result["lateral_positions_cm"]:
+        lines.append(
+            f"{k:>14} {result['mae_per_position']['greedy'][k]:>11.3f} "
+            f"{result['mae_per_position']['sampled'][k]:>12.3f}"
+        )
+    if result.get("start_jitter") and "mae_by_start" in result:
+        for mode, m in result["mae_by_start"].items():
+            lines.append(
+                f"{mode} MAE of trials that started short of α* {m['started_short']:.3f}°, past it "
+                f"{m['started_past']:.3f}° ({100 * m['share_started_past']:.0f} % of trials)"
+            )
+    if "distance" in result:
+        lines.append(
+            "distance error (%): "
+            + "  ".join(
+                f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
+                for k, v in result["distance"]["by_range"].items()
+            )
+        )
+    if "distance_between_grid" in result:
+        lines.append(
+            "between grid points (%): "
+            + "  ".join(
+                f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
+                for k, v in result["distance_between_grid"]["by_range"].items()
+            )
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="parallax-eval", description=__doc__.split("\n\n")[0])
+    parser.add_argument("run_dir", help="a run directory written by parallax-train")
+    parser.add_argument(
+        "--textures", type=int, default=1, help="held-out textures per distance (default 1)"
+    )
+    parser.add_argument(
+        "--distances",
+        type=float,
+        nargs="+",
+        default=None,
+        help="distances in metres (default: the grid 3.0, 3.1, …, 10.0)",
+    )
+    parser.add_argument(
+        "--between",
+        type=float,
+        nargs="*",
+        default=[3.05, 4.47, 5.55, 7.33, 8.81, 9.95],
+        help="extra distances between grid points (default: a few; none to skip)",
+    )
+    parser.add_argument(
+        "--perturbation",
+        choices=["auto", "on", "off"],
+        default="auto",
+        help="auto: as at the end of training",
+    )
+    parser.add_argument(
+        "--start-jitter",
+        choices=["auto", "on", "off"],
+        default="auto",
+        help="trials start from the run's env.initial_pan_jitter_deg… (on) or from pan 0 "
+        "as in the paper (off); auto: as at the end of training",
+    )
+    parser.add_argument(
+        "--out", default=None, help="where to write eval.json and figures (default: run dir)"
+    )
+    parser.add_argument(
+        "--checkpoint",
+        default=checkpoint.CHECKPOINT_NAME,
+        help=f"checkpoint file in the run dir (default {checkpoint.CHECKPOINT_NAME}; "
+        f"{checkpoint.BEFORE_PERTURBATION_NAME} for the state before §5's perturbation)",
+    )
+    parser.add_argument(
+        "--device", default=None, help="cpu or cuda (default: the device the run was trained on)"
+    )
+    parser.add_argument(
+        "--readout",
+        default=None,
+        help="last: each trial's last pan, the paper's q_p; best_reward (beyond the "
+        "paper): the pan where the coder's reward was highest (default: the "
+        "run's train.distance_readout)",
+    )
+    args = parser.parse_args(argv)
+    try:
+        result = evaluate(
+            args.run_dir,
+            textures=args.textures,
+            distances=args.distances,
+            between=args.between,
+            perturbation=args.perturbation,
+            out=args.out,
+            checkpoint_name=args.checkpoint,
+            device=args.device,
+            readout=args.readout,
+            start_jitter=args.start_jitter,
+        )
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"parallax-eval: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    print(format_eval(result))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,371 @@
+"""parallax-replay: the distance learner (paper §3.5–3.5.2, §6) alone, on a finished run's stream.
+
+The distance learner never acts on the world: the eye-movement vectors s it sees depend only on
+the world, the coder and the policy. So a run's metrics.jsonl, which logs every s with its true
+distance in order, lets the learner be re-run with another weighting y, queue size c, weighting
+on/off or readout (``train.distance_readout``: each trial's last and best-encoded pans are both
+logged), and the result is exactly what `parallax-train` would have reported with that setting and
+the same seed (tests/tools/test_replay.py checks this bit for bit). That makes the y, c and weighting
+ablations of Table 4 cost seconds per setting instead of a full run each.
+
+    parallax-replay SOURCE_RUN_OR_MULTIRUN --out DIR distance.y=0,0.5,1,2 distance.queue_size=100,300
+    parallax-replay … --until-perturbation     # only the part before §5's perturbation
+
+Each source run × each combination of the comma-separated values becomes DIR/<run>/<overrides>/
+with config.yaml (the source's, with the overrides applied), summary.json (the source's eye
+metrics, this learner's online distance errors) and, where the source has parallax-eval results
+with their eye-movement samples, the same evals with this learner's distance predictions, so
+`parallax-report DIR` tables them like runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import itertools
+import json
+import statistics
+import sys
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from parallax import checkpoint
+from parallax.checkpoint import BEFORE_PERTURBATION_NAME, CHECKPOINT_NAME
+from parallax.config import (
+    DISTANCE_READOUTS,
+    READOUT_PANS,
+    RUN_CONFIG_NAME,
+    distance_readout,
+    load_run_config,
+    run_name,
+)
+from parallax.experiment import seeds_for
+from parallax.metrics import DistanceErrorTracker, learn_online
+from parallax.tools.report.cli import (
+    METRICS_NAME,
+    SUMMARY_NAME,
+    ReportError,
+    eval_files,
+    find_run_dirs,
+    read_metrics,
+)
+
+
+class ReplayError(ValueError):
+    """A source run or an override that cannot be replayed; the message names it."""
+
+
+def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
+    """['distance.y=1,2', 'distance.weighting=false'] → every combination as a list of dotlist items."""
+    axes = []
+    for item in overrides:
+        key, sep, values = item.partition("=")
+        if not sep or not key or not values:
+            raise ReplayError(
+                f"{item!r} is neither an existing directory nor an override KEY=VALUE[,VALUE…]"
+            )
+        # the readout only picks which of the two logged pans of each trial s is built from
+        if not (key.startswith("distance.") or key == "train.distance_readout"):
+            raise ReplayError(
+                f"override {item!r}: only distance.* settings and train.distance_readout "
+                "can be replayed (anything else changes the eye movements: train a new run)"
+            )
+        axes.append([f"{key}={v}" for v in values.split(",")])
+    return [list(combo) for combo in itertools.product(*axes)] if axes else [[]]
+
+
+def _read_stream(run_dir: Path) -> list[dict]:
+    """The run's metrics.jsonl records, which must carry the eye-movement vectors s."""
+    records = read_metrics(run_dir)
+    if records and "pans" not in records[0]:
+        raise ReplayError(
+            f"{run_dir / METRICS_NAME} has no eye-movement vectors: the run predates "
+            "parallax-replay (logging of s); train it again to replay it"
+        )
+    return records
+
+
+def replay(
+    run_dir: str | Path, overrides: Sequence[str] = (), until_perturbation: bool = False
+) -> dict:
+    """The source run's summary with the distance learner re-run under `overrides`.
+
+    ``until_perturbation``: if the run was perturbed, replay only the presentations before §5's
+    perturbation and present the result as a run of that length without one (config and summary
+    alike), so that the ablation tables of parallax-report compare the unperturbed models (Table 4,
+    not Table 5). A run never perturbed is replayed whole.
+    """
+    run_dir = Path(run_dir)
+    cfg = load_run_config(run_dir)
+    summary_path = run_dir / SUMMARY_NAME
+    if not summary_path.is_file():
+        raise ReplayError(f"{run_dir} has no {SUMMARY_NAME}: replay finished runs only")
+    try:
+        cfg.merge_with_dotlist(list(overrides))
+    except Exception as exc:  # OmegaConf's errors are long; one line naming the value is enough
+        raise ReplayError(
+            f"cannot apply {list(overrides)} to {run_dir}: {str(exc).splitlines()[0]}"
+        ) from None
+    summary = json.loads(summary_path.read_text())
+    if int(cfg.train.threads) > 0:
+        # as in training and parallax-eval: two replays side by side, each with two intra-op
+        # threads on a 2-core machine, took minutes per run instead of seconds
+        torch.set_num_threads(int(cfg.train.threads))
+    robots = int(cfg.env.get("robots", 1))
+    learner = instantiate(
+        cfg.distance,
+        lateral_positions=[float(l) for l in cfg.curriculum.lateral_positions],
+        seed=seeds_for(int(cfg.seed), robots + 3)[robots + 2],
+    )
+    tracker = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
+    before = before_learner = None
+    records = _read_stream(run_dir)
+    if len(records) < int(summary["presentations"]):
+        raise ReplayError(
+            f"{run_dir / METRICS_NAME} has {len(records)} presentations, the summary "
+            f"{summary['presentations']}: the log is incomplete"
+        )
+    readout = distance_readout(cfg)
+    if readout not in DISTANCE_READOUTS:
+        raise ReplayError(
+            f"train.distance_readout must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}"
+        )
+    key = READOUT_PANS[readout]
+    if records and key not in records[0]:
+        raise ReplayError(
+            f"{run_dir / METRICS_NAME} has no best_pans (the run predates their logging): "
+            "it can be replayed with train.distance_readout=last only"
+        )
+    before_tracker = last_stats = before_stats = None
+    for record in records[: int(summary["presentations"])]:
+        if record["perturbed"] and before is None:
+            before = tracker.by_range()
+            before_learner = copy.deepcopy(
+                learner
+            )  # the model of checkpoint_before_perturbation.pt
+            before_tracker, before_stats = copy.deepcopy(tracker), last_stats
+            if until_perturbation:
+                break
+        if record["learnt_distance"]:
+            last_stats = (
+                learn_online(learner, tracker, record[key], record["distances"]) or last_stats
+            )
+    cut = until_perturbation and summary.get("before_perturbation") is not None
+    evals = _rescore_evals(run_dir, summary, before_learner, None if cut else learner, readout)
+    if cut:
+        return {**_cut_at_perturbation(cfg, summary, tracker, run_dir, overrides), "evals": evals}
+    summary["distance_error"] = tracker.by_range()
+    if summary.get("before_perturbation") is not None:
+        summary["before_perturbation"]["distance_error"] = before or {}
+    summary["replayed_from"] = str(run_dir)
+    summary["replay_overrides"] = list(overrides)
+    checkpoints = {
+        CHECKPOINT_NAME: (learner, tracker, last_stats),
+        BEFORE_PERTURBATION_NAME: (before_learner, before_tracker, before_stats),
+    }
+    return {
+        "config": cfg,
+        "summary": summary,
+        "evals": evals,
+        "source": run_dir,
+        "checkpoints": {name: parts for name, parts in checkpoints.items() if parts[0] is not None},
+    }
+
+
+def _replayed_checkpoint(source: Path, learner, tracker, stats, before_perturbation) -> dict:
+    """The source's checkpoint with the replayed distance learner (and its online-error tracker)
+    in place of the trained one: the eye, coder and policy are the source's, as in the replay."""
+    state = checkpoint.load(source, map_location="cpu")
+    state["experiment"]["distance"] = learner.state_dict()
+    state["dist"] = tracker.state_dict()
+    state["last_distance_stats"] = stats
+    if "before_perturbation" in state and state["before_perturbation"] is not None:
+        state["before_perturbation"] = before_perturbation
+    return state
+
+
+def _rescore_evals(
+    run_dir: Path, summary: dict, before_learner, final_learner, readout: str = "last"
+) -> dict[str, dict]:
+    """The source's parallax-eval results with the distances re-predicted by the replayed
+    learners, on the very eye movements the eval recorded (eval.json "samples"); keyed by the
+    eval file's path relative to the run. The frozen eye is the source's, so the eye-movement
+    numbers are kept as they are. Evals that read s otherwise than ``readout`` are left out."""
+    from parallax.tools.evaluate import distance_results
+
+    rescored = {}
+    start = (summary.get("before_perturbation") or {}).get("presentations")
+    for path in eval_files(run_dir):
+        result = json.loads(path.read_text())
+        samples = _eval_samples(result)
+        if not samples or result.get("readout", "last") != readout:
+            continue  # an eval from before the samples were kept, or of s read out otherwise
+        at = int(result.get("presentations", -1))
+        if result.get("perturbed") or start is None:
+            learner = final_learner if at == int(summary["presentations"]) else None
+        else:
+            learner = before_learner if at == start else None
+        if learner is None or not learner.is_ready:
+            continue
+        for key, kept in samples.items():
+            result[key] = distance_results(learner, kept["pans"], kept["distances"])
+        result["replayed_from"] = str(path)
+        rescored[str(path.relative_to(run_dir))] = result
+    return rescored
+
+
+def _eval_samples(result: dict) -> dict[str, dict]:
+    """eval.json key → the greedy eye's s vectors and distances that eval scored (or would have)."""
+    if "greedy_samples" in result:
+        names = {"grid": "distance", "between": "distance_between_grid"}
+        return {names[k]: v for k, v in result["greedy_samples"].items() if k in names}
+    return {
+        k: result[k]["samples"]
+        for k in ("distance", "distance_between_grid")
+        if "samples" in (result.get(k) or {})
+    }
+
+
+def _cut_at_perturbation(
+    cfg: DictConfig,
+    summary: dict,
+    tracker: DistanceErrorTracker,
+    run_dir: Path,
+    overrides: Sequence[str],
+) -> dict:
+    before = summary["before_perturbation"]
+    cut = {k: v for k, v in summary.items() if k not in ("before_perturbation", "timing")}
+    cut.update(before)
+    cut["distance_error"] = tracker.by_range()
+    cut["before_perturbation"] = None
+    cut["replayed_from"], cut["replay_overrides"] = str(run_dir), [*overrides, "until_perturbation"]
+    cfg.train.presentations = int(before["presentations"])
+    cfg.perturbation.merge_with(
+        {"camera_rotation_deg": 0.0, "blur_sigma": 0.0, "start_fraction": None}
+    )
+    return {"config": cfg, "summary": cut}
+
+
+def find_sources(paths: Iterable[str | Path]) -> list[Path]:
+    """Finished runs (summary.json beside config.yaml) at or below each path."""
+    found: list[Path] = []
+    for path in map(Path, paths):
+        if not path.is_dir():
+            raise ReplayError(f"{path} is not a directory (give a run or multirun directory)")
+        try:
+            runs = [run for run in find_run_dirs(path) if (run / SUMMARY_NAME).is_file()]
+        except ReportError:
+            runs = []
+        if not runs:
+            raise ReplayError(
+                f"{path} holds no finished run ({RUN_CONFIG_NAME} with {SUMMARY_NAME})"
+            )
+        found += runs
+    return found
+
+
+def write_replay(result: dict, out_dir: Path) -> None:
+    """The replay as a run directory: config, summary, the rescored evals and, for a whole
+    replay, the source's checkpoints with the replayed learner (so parallax-eval runs on it)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name, (learner, tracker, stats) in result.get("checkpoints", {}).items():
+        source = result["source"] / name
+        if source.is_file():
+            state = _replayed_checkpoint(
+                source, learner, tracker, stats, result["summary"].get("before_perturbation")
+            )
+            checkpoint.save_atomic(state, out_dir / name)
+    (out_dir / RUN_CONFIG_NAME).write_text(OmegaConf.to_yaml(result["config"], resolve=True))
+    (out_dir / SUMMARY_NAME).write_text(json.dumps(result["summary"], indent=2) + "\n")
+    for relative, evaluation in result.get("evals", {}).items():
+        if (
+            result["summary"].get("before_perturbation") is None
+            and relative != "eval.json"
+            and not evaluation.get("perturbed")
+        ):
+            relative = (
+                "eval.json"  # cut at the perturbation: the before-eval is this run's final one
+            )
+        (out_dir / relative).parent.mkdir(parents=True, exist_ok=True)
+        (out_dir / relative).write_text(json.dumps(evaluation, indent=2) + "\n")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="parallax-replay", description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "sources",
+        nargs="+",
+        metavar="RUN_OR_MULTIRUN_DIR_OR_OVERRIDE",
+        help="finished runs (or folders holding them) and distance.KEY=V1,V2 overrides",
+    )
+    parser.add_argument("--out", required=True, help="folder for the replayed runs")
+    parser.add_argument(
+        "--until-perturbation",
+        action="store_true",
+        help="replay only the presentations before the perturbation, if any (Table 4's models)",
+    )
+    # intermixed: the overrides may come after the options (as launch/ablation_lib.sh puts them)
+    args = parser.parse_intermixed_args(argv)
+    # Hydra's run directories have '=' in their names: what exists is a path, the rest overrides.
+    paths = [s for s in args.sources if Path(s).exists()]
+    overrides = [s for s in args.sources if not Path(s).exists()]
+    try:
+        combos = parse_sweep(overrides)
+        sources = find_sources(paths)
+        out = Path(args.out)
+        totals: dict[
+            str, dict[str, list[float]]
+        ] = {}  # combo → what was scored → one total per source
+        for source in sources:
+            for combo in combos:
+                target = out / source.name / run_name(",".join(combo))
+                result = replay(source, combo, until_perturbation=args.until_perturbation)
+                write_replay(result, target)
+                scored, label = replay_totals(result), " ".join(combo) or "(as trained)"
+                for what, total in scored.items():
+                    totals.setdefault(label, {}).setdefault(what, []).append(total)
+                print(
+                    f"[replay] {source.name} {label}: distance error "
+                    f"{_format_totals(scored) or '— (queue never filled)'}",
+                    flush=True,
+                )
+        if len(sources) > 1:
+            for combo, scored in totals.items():
+                spread = {
+                    what: f"{statistics.fmean(v):.2f} ± {statistics.stdev(v) if len(v) > 1 else 0.0:.2f} % "
+                    f"(n={len(v)})"
+                    for what, v in scored.items()
+                }
+                print(
+                    f"[replay] {combo}, mean ± sd over runs: "
+                    + "; ".join(f"{what} {text}" for what, text in spread.items()),
+                    flush=True,
+                )
+    except (ReplayError, FileNotFoundError) as exc:
+        sys.exit(f"parallax-replay: {exc}")
+
+
+def replay_totals(result: dict) -> dict[str, float]:
+    """The replayed learner's total distance errors (%): online over the training stream, then
+    each rescored parallax-eval file's grid (held-out photographs), by the file's path."""
+    totals = {}
+    online = result["summary"]["distance_error"].get("total")
+    if online is not None:
+        totals["online"] = float(online)
+    for relative, evaluation in sorted(result.get("evals", {}).items()):
+        total = (evaluation.get("distance") or {}).get("by_range", {}).get("total")
+        if total is not None:
+            totals[relative] = float(total)
+    return totals
+
+
+def _format_totals(totals: dict[str, float]) -> str:
+    return ", ".join(f"{what} {value:.2f}%" for what, value in totals.items())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""`parallax-report`: tables and figures of runs and sweeps, beside the paper's numbers."""

@@ -1,0 +1,300 @@
+"""MultiScaleCoder, the interface the trainer uses (paper §3.3–3.4, eqs. 3–6), and its configs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from hydra.utils import instantiate
+
+from parallax.coding import CoderOutput, MultiScaleCoder, save_png
+from parallax.coding.retina import as_gray_batch
+
+CONF = Path(__file__).resolve().parents[2] / "conf"
+SPECS = {
+    "coarse": {"window": 250, "subsample": 8, "patch": 10, "stride": 1},
+    "fine": {"window": 150, "subsample": 2, "patch": 10, "stride": 4},
+}
+SMALL_SPECS = {
+    "coarse": {"window": 64, "subsample": 4, "patch": 10, "stride": 2},
+    "fine": {"window": 40, "subsample": 2, "patch": 10, "stride": 5},
+}
+
+
+def _coder(**overrides) -> MultiScaleCoder:
+    arguments = dict(
+        scales=["coarse", "fine"],
+        scale_specs=SPECS,
+        atoms=288,
+        sparsity=10,
+        learning_rate=0.2,
+        normalisation="per_half",
+        learn=True,
+        seed=0,
+        image_size=256,
+    )
+    arguments.update(overrides)
+    return MultiScaleCoder(**arguments)
+
+
+def _photo_batch(batch: int, size: int = 256, shift: int = 0) -> np.ndarray:
+    """Crops of a photograph, the content moved right by ``shift`` px."""
+    import skimage.data
+
+    photo = skimage.data.astronaut()
+    crops = [
+        np.roll(photo[40 * index : 40 * index + size, 100 : 100 + size], shift, axis=1)
+        for index in range(batch)
+    ]
+    return np.stack(crops)
+
+
+def test_outputs_have_the_promised_shapes_and_meaning() -> None:
+    coder = _coder(learn=False)
+    assert coder.state_dim == 576
+    coder.set_reference(_photo_batch(2))
+    output = coder(_photo_batch(2, shift=3))
+    assert isinstance(output, CoderOutput)
+    assert output.state.shape == (2, 576) and output.state.dtype == torch.float32
+    assert output.reward.shape == (2,) and output.reward.dtype == torch.float32
+    assert set(output.errors) == {"coarse", "fine"}
+    torch.testing.assert_close(output.reward, -(output.errors["coarse"] + output.errors["fine"]))
+    assert ((output.errors["coarse"] > 0) & (output.errors["coarse"] < 1)).all()
+    assert (output.state >= 0).all() and torch.isfinite(output.state).all()
+
+
+def test_state_is_pooled_squared_coefficients_per_scale_in_order() -> None:
+    coder = _coder(learn=False)
+    images = _photo_batch(1)
+    coder.set_reference(images)
+    gray = as_gray_batch(images)
+    fine = coder.coders["fine"]
+    pairs = fine.patch_pairs(gray)[0]
+    code = fine.encode(pairs)
+    expected_theta = code.codes.square().mean(dim=0)
+    torch.testing.assert_close(coder(images).state[0, 288:], expected_theta)
+    # Σ_n θ_n = mean over patches of Σ_n b_n²; with k=10 that stays below ‖γ‖² = 2.
+    assert 0 < expected_theta.sum() < 2
+
+
+def test_learning_updates_after_encoding_and_keeps_atoms_unit_norm() -> None:
+    coder = _coder()
+    frozen = _coder(learn=False)
+    images = _photo_batch(1)
+    for model in (coder, frozen):
+        model.set_reference(images)
+    before = {name: tensor.clone() for name, tensor in coder.dictionaries.items()}
+    learning_output = coder(images)
+    frozen_output = frozen(images)
+    torch.testing.assert_close(
+        learning_output.state, frozen_output.state
+    )  # outputs precede the step
+    for name, dictionary in coder.dictionaries.items():
+        assert not torch.equal(dictionary, before[name])
+        torch.testing.assert_close(dictionary.norm(dim=1), torch.ones(288))
+        assert torch.equal(frozen.dictionaries[name], before[name])
+    # learn=False on the call overrides the module flag
+    snapshot = coder.dictionaries["coarse"].clone()
+    coder(images, learn=False)
+    assert torch.equal(coder.dictionaries["coarse"], snapshot)
+
+
+def test_a_batch_update_averages_over_all_patches_of_all_images() -> None:
+    single, double = _coder(), _coder()
+    image = _photo_batch(1)
+    single.set_reference(image)
+    double.set_reference(np.concatenate([image, image]))
+    single(image)
+    double(np.concatenate([image, image]))
+    for name in ("coarse", "fine"):
+        torch.testing.assert_close(
+            single.dictionaries[name], double.dictionaries[name], atol=1e-6, rtol=0
+        )
+
+
+def test_training_lowers_the_error_on_a_repeated_view() -> None:
+    coder = _coder(scales=["fine"])
+    coder.set_reference(_photo_batch(1))
+    view = _photo_batch(1, shift=2)
+    first = coder(view).errors["fine"].item()
+    for _ in range(30):
+        coder(view)
+    assert coder(view).errors["fine"].item() < 0.8 * first
+
+
+def test_same_seed_same_numbers_and_scales_seeded_independently() -> None:
+    first, second = _coder(seed=5), _coder(seed=5)
+    images = _photo_batch(1)
+    outputs = []
+    for coder in (first, second):
+        coder.set_reference(images)
+        coder(images)
+        outputs.append(coder(_photo_batch(1, shift=1)))
+    assert torch.equal(outputs[0].state, outputs[1].state)
+    assert torch.equal(outputs[0].reward, outputs[1].reward)
+    assert not torch.equal(
+        _coder(seed=6).dictionaries["coarse"], _coder(seed=5).dictionaries["coarse"]
+    )
+    coarse_only = _coder(seed=5, scales=["coarse"])
+    assert torch.equal(coarse_only.dictionaries["coarse"], _coder(seed=5).dictionaries["coarse"])
+    assert not torch.equal(
+        _coder(seed=5).dictionaries["coarse"], _coder(seed=5).dictionaries["fine"]
+    )
+
+
+def test_state_dict_round_trip_carries_dictionaries_but_not_the_reference() -> None:
+    trained = _coder(seed=1)
+    trained.set_reference(_photo_batch(1))
+    trained(_photo_batch(1, shift=2))
+    state = trained.state_dict()
+    assert set(state) == {"coders.coarse.dictionary", "coders.fine.dictionary"}
+    restored = _coder(seed=2)
+    restored.load_state_dict(state)
+    restored.set_reference(_photo_batch(1))
+    for model in (trained, restored):
+        model.learn = False
+    torch.testing.assert_close(
+        restored(_photo_batch(1, shift=4)).state, trained(_photo_batch(1, shift=4)).state
+    )
+
+
+def test_frozen_coder_notices_a_loaded_dictionary() -> None:
+    coder = _coder(learn=False, scales=["fine"])
+    coder.set_reference(_photo_batch(1))
+    before = coder(_photo_batch(1, shift=1)).state
+    other = _coder(seed=9, scales=["fine"])
+    coder.load_state_dict(other.state_dict())
+    other.set_reference(_photo_batch(1))
+    after = coder(_photo_batch(1, shift=1)).state
+    assert not torch.equal(before, after)
+    torch.testing.assert_close(after, other(_photo_batch(1, shift=1), learn=False).state)
+
+
+def test_flat_images_give_finite_outputs() -> None:
+    coder = _coder()
+    flat = np.full((2, 256, 256, 3), 90, dtype=np.uint8)
+    coder.set_reference(flat)
+    output = coder(flat)
+    assert torch.isfinite(output.state).all() and torch.equal(output.reward, torch.zeros(2))
+    assert all(torch.isfinite(dictionary).all() for dictionary in coder.dictionaries.values())
+
+
+def test_gray_float_and_tensor_inputs_agree_with_uint8_rgb() -> None:
+    coder = _coder(learn=False, image_size=(128, 160), scale_specs=SMALL_SPECS)
+    rgb = _photo_batch(1, size=160)[:, :128]
+    coder.set_reference(rgb)
+    from_rgb = coder(rgb).state
+    gray = as_gray_batch(rgb).numpy()
+    coder.set_reference(torch.from_numpy(gray))
+    torch.testing.assert_close(coder(gray).state, from_rgb, atol=1e-5, rtol=1e-4)
+
+
+def test_joint_normalisation_runs_and_differs_from_per_half() -> None:
+    images = _photo_batch(1)
+    per_half, joint = _coder(learn=False), _coder(learn=False, normalisation="joint")
+    for coder in (per_half, joint):
+        coder.set_reference(images)
+    assert not torch.allclose(
+        per_half(_photo_batch(1, shift=5)).state, joint(_photo_batch(1, shift=5)).state
+    )
+
+
+def test_recompute_pursuit_gives_the_same_outputs() -> None:
+    images = _photo_batch(1)
+    fast, straightforward = _coder(learn=False), _coder(learn=False, pursuit="recompute")
+    for coder in (fast, straightforward):
+        coder.set_reference(images)
+    torch.testing.assert_close(
+        fast(_photo_batch(1, shift=2)).reward,
+        straightforward(_photo_batch(1, shift=2)).reward,
+        atol=1e-4,
+        rtol=0,
+    )
+
+
+def test_compiled_and_torch_pursuit_loops_learn_bit_identical_dictionaries() -> None:
+    from parallax.coding import native
+
+    if native.load_kernels() is None:
+        pytest.skip(f"the fused pursuit kernel is unavailable: {native.kernel_failure()}")
+    coders = [
+        _coder(scales=["coarse", "fine"], pursuit=pursuit) for pursuit in ("gram_cpp", "gram_torch")
+    ]
+    for coder in coders:
+        coder.set_reference(_photo_batch(2))
+    for shift in (1, 3, 5):
+        compiled, loop = (coder(_photo_batch(2, shift=shift)) for coder in coders)
+        assert torch.equal(compiled.state, loop.state) and torch.equal(compiled.reward, loop.reward)
+    for name in ("coarse", "fine"):
+        assert torch.equal(coders[0].dictionaries[name], coders[1].dictionaries[name])
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        ({"image_size": 200}, r"scale_specs\.coarse\.window=250"),
+        ({"scales": []}, "non-empty"),
+        ({"scales": ["coarse", "coarse"]}, "repeat"),
+        ({"scales": ["middle"]}, "middle"),
+        ({"atoms": 0}, "atoms"),
+        ({"learning_rate": -0.1}, "learning_rate"),
+        ({"normalisation": "global"}, "normalisation"),
+        ({"seed": -1}, "seed"),
+        ({"pursuit": "omp"}, "pursuit"),
+    ],
+)
+def test_bad_configuration_is_refused_with_the_key_named(overrides: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        _coder(**overrides)
+
+
+def test_misuse_at_call_time_is_explained() -> None:
+    coder = _coder(scales=["fine"])
+    with pytest.raises(RuntimeError, match="set_reference"):
+        coder(_photo_batch(1))
+    coder.set_reference(_photo_batch(2))
+    with pytest.raises(ValueError, match="1 images for 2 references"):
+        coder(_photo_batch(1))
+    with pytest.raises(ValueError, match="window 150"):
+        coder(np.zeros((2, 100, 100), dtype=np.float32))
+
+
+def test_atom_grid_draws_every_pair(tmp_path: Path) -> None:
+    coder = _coder(atoms=12, scales=["fine"])
+    grid = coder.atom_grid("fine", columns=4, zoom=2, gap=1)
+    assert grid.dtype == np.uint8 and grid.ndim == 2
+    assert grid.shape == (2 * (3 * 11 + 1), 2 * (4 * 22 + 1))
+    dictionary = coder.dictionaries["fine"][0].numpy()
+    first_half = grid[2 : 2 + 20 : 2, 2 : 2 + 20 : 2].astype(float) - 128
+    peak = np.abs(dictionary).max()
+    np.testing.assert_allclose(
+        first_half, np.rint(127 * dictionary[:100].reshape(10, 10) / peak), atol=1
+    )
+    path = save_png(grid, tmp_path / "atoms.png")
+    assert path.stat().st_size > 0
+    with pytest.raises(ValueError, match="unknown scale"):
+        coder.atom_grid("coarse")
+
+
+@pytest.mark.parametrize(
+    ("name", "scales"),
+    [("two_scale", ["coarse", "fine"]), ("coarse", ["coarse"]), ("fine", ["fine"])],
+)
+def test_configs_instantiate(name: str, scales: list[str]) -> None:
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        config = compose(overrides=[f"+coder={name}"])
+    coder = instantiate(config.coder, image_size=256, seed=0)
+    assert isinstance(coder, MultiScaleCoder) and coder.scales == scales
+    assert coder.state_dim == 288 * len(scales)
+
+
+def test_scale_ablation_is_one_override() -> None:
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        config = compose(
+            overrides=["+coder=two_scale", "coder.scales=[coarse]", "coder.learn=false"]
+        )
+    coder = instantiate(config.coder, image_size=256, seed=0)
+    assert coder.scales == ["coarse"] and coder.learn is False

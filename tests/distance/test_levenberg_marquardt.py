@@ -1,0 +1,260 @@
+"""Levenberg–Marquardt optimiser (paper §3.5, trainlm): against MINPACK, against Adam, safety."""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+
+import numpy as np
+import pytest
+import torch
+from scipy.optimize import least_squares
+from torch import nn
+
+from parallax.distance import DistanceMLP, LevenbergMarquardt
+from parallax.distance.levenberg_marquardt import _DampedSolver
+from parallax.tools.analysis.synthetic_pans import PAPER_LATERAL_POSITIONS_M, paper_regression
+
+
+def regression(forward, inputs, targets):
+    return forward(inputs) - targets
+
+
+def scaled_network(
+    inputs: torch.Tensor, targets: torch.Tensor, hidden: int, seed: int
+) -> DistanceMLP:
+    network = DistanceMLP(inputs.shape[1], hidden, generator=torch.Generator().manual_seed(seed))
+    network.fit_scaling(inputs, targets, preserve_function=False)
+    return network
+
+
+def minpack_sse(
+    optimizer: LevenbergMarquardt, inputs: torch.Tensor, targets: torch.Tensor
+) -> float:
+    """SSE that SciPy's MINPACK reaches from the optimiser's current parameters (left unchanged)."""
+    batch = (inputs, targets)
+
+    def residuals(flat):
+        with torch.no_grad():
+            return optimizer._residuals(torch.from_numpy(flat), regression, batch).numpy()
+
+    def jacobian(flat):
+        return optimizer._jacobian(torch.from_numpy(flat), regression, batch, True).numpy()
+
+    solution = least_squares(
+        residuals, optimizer._flat().numpy().copy(), jac=jacobian, method="lm", max_nfev=5000
+    )
+    assert solution.status > 0, solution.message
+    return 2.0 * float(solution.cost)
+
+
+def test_matches_minpack_from_the_same_start_teacher_student():
+    """Data from a 2-3-1 network plus noise, both optimisers started from the same nearby point."""
+    rng = np.random.default_rng(0)
+    inputs = torch.from_numpy(rng.uniform(-1.0, 1.0, size=(200, 2)))
+    teacher = DistanceMLP(2, 3, generator=torch.Generator().manual_seed(11))
+    with torch.no_grad():
+        targets = teacher(inputs) + torch.from_numpy(rng.normal(0.0, 0.05, size=200))
+    student = DistanceMLP(2, 3)
+    student.load_state_dict(teacher.state_dict())
+    with torch.no_grad():
+        for parameter in student.parameters():
+            parameter.add_(0.05 * torch.from_numpy(rng.normal(size=tuple(parameter.shape))))
+    optimizer = LevenbergMarquardt(student)
+    reference = minpack_sse(optimizer, inputs, targets)
+    result = optimizer.run(regression, inputs, targets, epochs=300, per_sample=True)
+    assert result.stop == "min_grad"
+    assert result.sse <= 1.01 * reference
+
+
+def test_matches_minpack_on_the_paper_regression_for_most_starts():
+    """One lateral position, 2 hidden units: non-convex, so ask it of the median of 5 starts."""
+    ratios = []
+    for seed in range(5):
+        pans, distances = paper_regression(
+            100, np.random.default_rng(seed), lateral_positions_m=[0.10]
+        )
+        inputs, targets = torch.from_numpy(pans), torch.from_numpy(distances)
+        optimizer = LevenbergMarquardt(scaled_network(inputs, targets, hidden=2, seed=seed))
+        reference = minpack_sse(optimizer, inputs, targets)
+        ratios.append(
+            optimizer.run(regression, inputs, targets, epochs=300, per_sample=True).sse / reference
+        )
+    assert statistics.median(ratios) <= 1.01, ratios
+
+
+def test_beats_adam_in_the_same_wall_clock_budget():
+    budget_s = 2.0
+    pans, distances = paper_regression(300, np.random.default_rng(0))
+    inputs, targets = torch.from_numpy(pans), torch.from_numpy(distances)
+    lm_network = scaled_network(inputs, targets, hidden=30, seed=0)
+    adam_network = scaled_network(inputs, targets, hidden=30, seed=0)
+
+    optimizer = LevenbergMarquardt(lm_network)
+    # torch.func's first call in a process costs about a second; that is set-up, not optimisation
+    LevenbergMarquardt(scaled_network(inputs, targets, hidden=30, seed=1)).step(
+        regression, inputs, targets, per_sample=True
+    )
+    deadline = time.perf_counter() + budget_s
+    while time.perf_counter() < deadline:
+        if optimizer.step(regression, inputs, targets, per_sample=True).stop:
+            break
+    lm_sse = float((lm_network(inputs) - targets).detach().square().sum())
+
+    adam = torch.optim.Adam(adam_network.parameters(), lr=1e-2)
+    deadline = time.perf_counter() + budget_s
+    while time.perf_counter() < deadline:
+        adam.zero_grad()
+        loss = (adam_network(inputs) - targets).square().mean()
+        loss.backward()
+        adam.step()
+    adam_sse = float((adam_network(inputs) - targets).detach().square().sum())
+    assert math.isfinite(lm_sse) and lm_sse < adam_sse, (lm_sse, adam_sse)
+
+
+def test_per_sample_jacobian_equals_full_jacobian():
+    pans, distances = paper_regression(
+        20, np.random.default_rng(1), lateral_positions_m=PAPER_LATERAL_POSITIONS_M[:4]
+    )
+    inputs, targets = torch.from_numpy(pans), torch.from_numpy(distances)
+    optimizer = LevenbergMarquardt(scaled_network(inputs, targets, hidden=5, seed=1))
+    flat = optimizer._flat()
+    per_sample = optimizer._jacobian(flat, regression, (inputs, targets), True)
+    full = optimizer._jacobian(flat, regression, (inputs, targets), False)
+    assert per_sample.shape == (20, optimizer.num_params)
+    torch.testing.assert_close(per_sample, full, rtol=1e-12, atol=1e-12)
+
+
+def test_dual_and_primal_steps_agree():
+    generator = torch.Generator().manual_seed(0)
+    jacobian = torch.randn(30, 50, generator=generator, dtype=torch.float64)
+    errors = torch.randn(30, generator=generator, dtype=torch.float64)
+    dual = _DampedSolver(jacobian, errors, jacobian.T @ errors)
+    assert dual.dual
+    gram = jacobian.T @ jacobian + 0.5 * torch.eye(50, dtype=torch.float64)
+    primal_step = -torch.linalg.solve(gram, jacobian.T @ errors)
+    torch.testing.assert_close(dual(0.5), primal_step, rtol=1e-9, atol=1e-10)
+
+
+def test_works_for_another_small_module_in_float32():
+    inputs = torch.linspace(-3, 3, 64).unsqueeze(-1)
+    targets = torch.sin(inputs).squeeze(-1)
+    torch.manual_seed(0)
+    model = nn.Sequential(nn.Linear(1, 8), nn.Tanh(), nn.Linear(8, 1))
+    optimizer = LevenbergMarquardt(model)
+    start = float((model(inputs).squeeze(-1) - targets).detach().square().sum())
+    result = optimizer.run(
+        lambda forward, x, y: forward(x).squeeze(-1) - y, inputs, targets, epochs=100
+    )
+    assert result.sse < 1e-3 * start
+    assert all(p.dtype == torch.float32 and torch.isfinite(p).all() for p in model.parameters())
+
+
+def test_linear_problem_stops_at_min_grad():
+    model = nn.Linear(2, 1, dtype=torch.float64)
+    inputs = torch.tensor([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, -1.0]], dtype=torch.float64)
+    targets = inputs @ torch.tensor([2.0, -3.0], dtype=torch.float64) + 0.5
+    optimizer = LevenbergMarquardt(model)
+    result = optimizer.run(
+        lambda forward, x, y: forward(x).squeeze(-1) - y, inputs, targets, epochs=50
+    )
+    assert result.stop == "min_grad" and result.epochs < 10
+    torch.testing.assert_close(
+        model.weight.detach(), torch.tensor([[2.0, -3.0]], dtype=torch.float64)
+    )
+
+
+def test_failed_steps_are_rejected_and_mu_grows():
+    """Any move away from the start gives NaN residuals: every step must be thrown away."""
+    model = nn.Linear(1, 1, bias=False, dtype=torch.float64)
+    start = model.weight.detach().clone()
+    inputs = torch.ones(3, 1, dtype=torch.float64)
+
+    def poisoned(forward, x):
+        prediction = forward(x).squeeze(-1)
+        moved = (prediction - float(start)).abs() > 0
+        return torch.where(moved, torch.full_like(prediction, math.nan), prediction - 5.0)
+
+    optimizer = LevenbergMarquardt(model, mu=1e-3, mu_max=1.0)
+    result = optimizer.step(poisoned, inputs)
+    assert not result.accepted and result.stop == "mu_max"
+    assert optimizer.mu == pytest.approx(10.0)  # tried 1e-3, 1e-2, 1e-1, 1 and gave up at 10
+    assert torch.equal(model.weight.detach(), start)
+    assert optimizer.step(poisoned, inputs).stop == "mu_max"  # and stays stopped
+
+
+def test_overflow_never_reaches_the_parameters():
+    """exp() of a large input: the residuals or the Jacobian overflow after the first steps."""
+    model = nn.Linear(1, 1, dtype=torch.float64)
+    with torch.no_grad():
+        model.weight.fill_(0.0), model.bias.fill_(0.0)
+    inputs = torch.full((4, 1), 800.0, dtype=torch.float64)
+    targets = torch.full((4,), 1e150, dtype=torch.float64)
+    optimizer = LevenbergMarquardt(model, mu=1e-6)
+    result = optimizer.run(
+        lambda forward, x, y: torch.exp(forward(x).squeeze(-1)) - y, inputs, targets, epochs=50
+    )
+    assert all(torch.isfinite(p).all() for p in model.parameters())
+    assert result.stop in {"mu_max", "non_finite_jacobian", "min_grad"}
+    assert math.isfinite(result.sse)
+
+
+def test_nan_jacobian_gives_no_step():
+    jacobian = torch.full((3, 2), math.nan, dtype=torch.float64)
+    errors = torch.ones(3, dtype=torch.float64)
+    assert _DampedSolver(jacobian, errors, jacobian.T @ errors)(1e-3) is None
+
+
+def test_refuses_a_model_too_large_for_a_dense_jacobian():
+    with pytest.raises(ValueError, match="10100 trainable parameters"):
+        LevenbergMarquardt(nn.Linear(100, 100), max_params=5000)
+    optimizer = LevenbergMarquardt(nn.Linear(4, 1), max_jacobian_elements=100)
+    with pytest.raises(ValueError, match="max_jacobian_elements"):
+        optimizer.step(lambda forward, x: forward(x).squeeze(-1), torch.ones(50, 4))
+
+
+def test_rejects_bad_settings_and_data():
+    with pytest.raises(ValueError, match="mu"):
+        LevenbergMarquardt(nn.Linear(2, 1), mu=-1.0)
+    with pytest.raises(ValueError, match="mu_decrease"):
+        LevenbergMarquardt(nn.Linear(2, 1), mu_decrease=2.0)
+    optimizer = LevenbergMarquardt(nn.Linear(2, 1))
+    with pytest.raises(ValueError, match="not finite"):
+        optimizer.step(lambda forward, x: forward(x).squeeze(-1), torch.full((3, 2), math.inf))
+    with pytest.raises(ValueError, match="epochs"):
+        optimizer.run(lambda forward, x: forward(x).squeeze(-1), torch.ones(3, 2), epochs=0)
+
+
+@pytest.mark.parametrize("per_sample", [False, True])
+def test_weight_decay_finds_the_ridge_solution(per_sample):
+    # Beyond trainlm: Σe² + λ‖w‖² (bias included). For a linear model that is ridge regression,
+    # whose minimiser has a closed form.
+    generator = torch.Generator().manual_seed(5)
+    inputs = torch.randn(12, 3, generator=generator, dtype=torch.float64)
+    targets = inputs @ torch.tensor([1.5, -2.0, 0.5], dtype=torch.float64) + 0.3
+    targets = targets + 0.1 * torch.randn(12, generator=generator, dtype=torch.float64)
+    decay = 2.0
+    model = nn.Linear(3, 1, dtype=torch.float64)
+    optimizer = LevenbergMarquardt(model, weight_decay=decay)
+    result = optimizer.run(
+        lambda forward, x, y: forward(x).squeeze(-1) - y,
+        inputs,
+        targets,
+        epochs=50,
+        per_sample=per_sample,
+    )
+    design = torch.cat([inputs, torch.ones(12, 1, dtype=torch.float64)], dim=1)
+    ridge = torch.linalg.solve(
+        design.T @ design + decay * torch.eye(4, dtype=torch.float64), design.T @ targets
+    )
+    torch.testing.assert_close(
+        torch.cat([model.weight.detach().reshape(-1), model.bias.detach()]),
+        ridge,
+        rtol=1e-6,
+        atol=1e-6,
+    )
+    data_sse = float((model(inputs).squeeze(-1) - targets).detach().square().sum())
+    assert result.sse == pytest.approx(data_sse + decay * float(ridge.square().sum()), rel=1e-9)
+    with pytest.raises(ValueError, match="weight_decay must be a finite number ≥ 0, got -1"):
+        LevenbergMarquardt(nn.Linear(2, 1), weight_decay=-1)

@@ -1,0 +1,80 @@
+"""parallax-bench runs end to end and reports every part; it asserts no speed (shared machine)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from parallax.tools.bench import cli as bench
+from parallax.config import compose
+
+
+def test_coder_work_counts_the_paper_patches():
+    cfg = compose()
+    both = bench.coder_work_per_frame(cfg)
+    coarse = bench.coder_work_per_frame(compose(["coder.scales=[coarse]"]))
+    fine = bench.coder_work_per_frame(compose(["coder.scales=[fine]"]))
+    assert both["flops"] == coarse["flops"] + fine["flops"]
+    N, K, k = 288, 200, 10
+    # 529 coarse patches (23×23 after ×8), 289 fine ones (17×17 after ×2)
+    assert (
+        coarse["flops"]
+        == 2 * 529 * K * N + 2 * N * N * K + 2 * k * 529 * N + 4 * 529 * k * K + 2 * 529 * k
+    )
+    assert fine["flops"] < coarse["flops"]
+    # the Gram matrix is made once per lockstep: 16 robots cost less than 16 single frames
+    assert coarse["shared_flops"] == 2 * N * N * K
+    limits = {"matmul_gflops": 100.0, "copy_gbps": 1e6}  # compute-bound
+    one, sixteen = bench.coder_bound_ms(both, limits, 1), bench.coder_bound_ms(both, limits, 16)
+    assert one == pytest.approx(both["flops"] / 1e8)
+    assert sixteen == pytest.approx(
+        (16 * (both["flops"] - both["shared_flops"]) + both["shared_flops"]) / 1e8
+    )
+    assert sixteen < 16 * one
+
+
+def test_ceiling_is_every_core_busy_with_the_coder_at_its_bound():
+    # one robot: 1 ms of render and a 2 ms coder bound on 2 cores → 2 / 3 ms
+    assert bench.ceiling_steps_per_second(1.0, 2.0, robots=1, cores=2) == pytest.approx(2000 / 3)
+    # 16 robots share one coder bound for the lockstep; twice the cores, twice the ceiling
+    sixteen = bench.ceiling_steps_per_second(1.0, 20.0, robots=16, cores=2)
+    assert sixteen == pytest.approx(2 * 16 / 36 * 1e3)
+    assert bench.ceiling_steps_per_second(1.0, 20.0, robots=16, cores=4) == pytest.approx(
+        2 * sixteen
+    )
+    assert bench.usable_cores() >= 1
+
+
+def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    bench.main(
+        ["--no-components", "--robots", "1", "2", "1", "--presentations", "1", "--json", str(out)]
+    )
+    printed = capsys.readouterr().out
+    assert "[end to end]" in printed and "[roofline cpu]" in printed
+    report = json.loads(out.read_text())
+    # each B once, however often it was asked for; the cases take turns in one process
+    assert list(report["end_to_end"]["cpu"]) == ["B=1", "B=2"]
+    assert report["end_to_end"]["cpu"]["B=1"]["steps_per_second"] > 0
+    assert report["end_to_end"]["cpu"]["B=2"]["steps_per_second"] > 0
+    # the trainer's whole step, with the distance learner fitting a full queue at every s
+    assert report["end_to_end"]["cpu"]["B=1"]["trainer_steps_per_second"] > 0
+    cpu = report["roofline"]["cpu"]
+    assert cpu["coder_bound_ms_per_frame"] > 0
+    assert report["end_to_end"]["cpu"]["B=1"]["coder_bound_ms"] == cpu["coder_bound_ms_per_frame"]
+    assert cpu["matmul_gflops"] > 0 and cpu["copy_gbps"] > 0
+    # where the CPU went: never more cores busy than the machine has, so the rate with every
+    # core busy is at least the measured one (one presentation: no medians in between)
+    one = report["end_to_end"]["cpu"]["B=1"]
+    assert 0 < one["busy_cores"] <= report["ceiling"]["cpu"]["cores"] * 1.01
+    assert one["steps_per_second_all_cores_busy"] >= one["steps_per_second"] * 0.99
+    assert one["steps_per_second_min"] == one["steps_per_second"] == one["steps_per_second_max"]
+    ceiling = report["ceiling"]["cpu"]
+    assert ceiling["render_cpu_ms_per_frame"] > 0
+    assert ceiling["B=1"]["steps_per_second"] == pytest.approx(
+        bench.ceiling_steps_per_second(
+            ceiling["render_cpu_ms_per_frame"], cpu["coder_bound_ms_per_frame"], 1, ceiling["cores"]
+        )
+    )
+    assert "[ceiling cpu]" in printed and "cores busy" in printed

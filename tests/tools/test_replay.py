@@ -1,0 +1,241 @@
+"""parallax-replay: the distance learner re-run on a run's logged eye-movement vectors s must be
+exactly the run's own distance learner (same seed, same settings), and must respond to y/c."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from parallax.config import load_run_config
+from parallax.tools.replay import ReplayError, main, parse_sweep, replay
+
+
+@pytest.fixture(scope="module")
+def perturbed_run(tmp_path_factory):
+    from tests.conftest import train_tiny_run
+
+    # 8 presentations, queue c = 3, weighting on, perturbation from presentation 4
+    return train_tiny_run(
+        tmp_path_factory.mktemp("run"),
+        [
+            "train.presentations=8",
+            "distance.weighting=true",
+            "distance.y=1.0",
+            "perturbation=rotate_blur",
+            "perturbation.start_fraction=0.5",
+        ],
+    )
+
+
+def test_replay_as_trained_is_bit_identical(perturbed_run):
+    trained = json.loads((perturbed_run / "summary.json").read_text())
+    result = replay(perturbed_run)["summary"]
+    assert trained["distance_error"], "the tiny run must have made online predictions"
+    # compared as JSON text: empty ranges are NaN, and NaN != NaN
+    assert json.dumps(result["distance_error"]) == json.dumps(trained["distance_error"])
+    assert json.dumps(result["before_perturbation"]["distance_error"]) == json.dumps(
+        trained["before_perturbation"]["distance_error"]
+    )
+    assert result["mae_per_position"] == trained["mae_per_position"]
+
+
+def test_replay_with_other_settings_changes_the_learner(perturbed_run):
+    trained = json.loads((perturbed_run / "summary.json").read_text())
+    other = replay(perturbed_run, ["distance.y=8", "distance.weighting=true"])
+    assert other["config"].distance.y == 8
+    bigger = replay(perturbed_run, ["distance.queue_size=4"])["summary"]
+    # a larger queue fills one presentation later: one prediction fewer in the online window
+    assert json.dumps(bigger["distance_error"]) != json.dumps(trained["distance_error"])
+
+
+def test_the_best_reward_readout_trains_and_replays_exactly(perturbed_run, tmp_path):
+    # train.distance_readout=best_reward (beyond the paper): the learner is fed each trial's
+    # best-encoded pan. The eye never depends on the learner, so replaying the last-pan run with
+    # the other readout must give exactly the run trained with it.
+    from tests.conftest import train_tiny_run
+
+    best_run = train_tiny_run(
+        tmp_path / "best",
+        [
+            "train.presentations=8",
+            "distance.weighting=true",
+            "distance.y=1.0",
+            "perturbation=rotate_blur",
+            "perturbation.start_fraction=0.5",
+            "train.distance_readout=best_reward",
+        ],
+    )
+    trained = json.loads((best_run / "summary.json").read_text())
+    last = json.loads((perturbed_run / "summary.json").read_text())
+    assert trained["mae_per_position"] == last["mae_per_position"]  # the same eye
+    assert json.dumps(trained["distance_error"]) != json.dumps(last["distance_error"])
+    replayed = replay(perturbed_run, ["train.distance_readout=best_reward"])["summary"]
+    assert json.dumps(replayed["distance_error"]) == json.dumps(trained["distance_error"])
+    records = [json.loads(line) for line in (best_run / "metrics.jsonl").read_text().splitlines()]
+    assert all(len(r["best_pans"][0]) == len(r["pans"][0]) for r in records)
+    with pytest.raises(
+        ReplayError, match="train.distance_readout must be one of last, best_reward, got 'peak'"
+    ):
+        replay(perturbed_run, ["train.distance_readout=peak"])
+
+
+def test_until_perturbation_is_the_unperturbed_run(perturbed_run):
+    trained = json.loads((perturbed_run / "summary.json").read_text())
+    cut = replay(perturbed_run, until_perturbation=True)
+    before = trained["before_perturbation"]
+    assert cut["summary"]["presentations"] == before["presentations"] == 4
+    assert json.dumps(cut["summary"]["distance_error"]) == json.dumps(before["distance_error"])
+    assert cut["summary"]["mae_per_position"] == before["mae_per_position"]
+    assert (
+        cut["config"].train.presentations == 4 and cut["config"].perturbation.start_fraction is None
+    )
+    assert cut["config"].perturbation.camera_rotation_deg == 0.0
+
+
+def test_cli_writes_run_like_folders(perturbed_run, tmp_path, capsys):
+    main([str(perturbed_run), "--out", str(tmp_path / "out"), "distance.queue_size=3,4"])
+    written = sorted(p.parent.name for p in (tmp_path / "out").rglob("summary.json"))
+    assert written == ["distance.queue_size=3", "distance.queue_size=4"]
+    cfg = load_run_config(next((tmp_path / "out").rglob("distance.queue_size=4")))
+    assert cfg.distance.queue_size == 4
+    assert "distance error" in capsys.readouterr().out
+    # parallax-report reads the replays as runs and tables the factor that varies
+    from parallax.tools.report.cli import build_report
+
+    text, data = build_report([tmp_path / "out"], out=tmp_path / "report", tables="ablation")
+    assert "distance.queue_size" in text
+
+
+def test_bad_overrides_are_refused_with_the_value():
+    with pytest.raises(ReplayError, match="coder.atoms=4"):
+        parse_sweep(["coder.atoms=4"])
+    with pytest.raises(ReplayError, match="'distance.y' is neither an existing directory"):
+        parse_sweep(["distance.y"])
+    with pytest.raises(ReplayError, match="train.presentations=4"):
+        parse_sweep(["train.presentations=4"])
+    # the readout only picks which logged pan builds s, so the command line sweeps it too
+    assert parse_sweep(["train.distance_readout=best_reward,last"]) == [
+        ["train.distance_readout=best_reward"],
+        ["train.distance_readout=last"],
+    ]
+    assert parse_sweep(["distance.y=1,2", "distance.weighting=false"]) == [
+        ["distance.y=1", "distance.weighting=false"],
+        ["distance.y=2", "distance.weighting=false"],
+    ]
+
+
+def test_run_directories_named_with_equals_signs_are_paths(perturbed_run, tmp_path):
+    named = tmp_path / "distance.y=1,seed=0"
+    named.symlink_to(perturbed_run, target_is_directory=True)
+    main([str(named), "--out", str(tmp_path / "out"), "--until-perturbation", "distance.y=2"])
+    assert len(list((tmp_path / "out").rglob("summary.json"))) == 1
+
+
+def test_a_folder_without_runs_is_refused(tmp_path):
+    with pytest.raises(SystemExit, match="holds no finished run"):
+        main([str(tmp_path), "--out", str(tmp_path / "out")])
+
+
+def test_replayed_learners_are_scored_on_the_evals_eye_movements(perturbed_run, tmp_path):
+    from parallax.tools.evaluate import evaluate
+
+    after = evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5])
+    before = evaluate(
+        perturbed_run,
+        distances=[4.0, 6.0],
+        between=[5.5],
+        out=perturbed_run / "eval_before",
+        checkpoint_name="checkpoint_before_perturbation.pt",
+    )
+    assert len(after["distance"]["samples"]["pans"]) == 2
+    # as trained: the replayed learners are the run's own, so the evals come back unchanged
+    same = replay(perturbed_run)["evals"]
+    assert json.dumps(same["eval.json"]["distance"]) == json.dumps(after["distance"])
+    assert json.dumps(same["eval_before/eval.json"]["distance_between_grid"]) == json.dumps(
+        before["distance_between_grid"]
+    )
+    # cut at the perturbation, the before-eval becomes the run's final eval
+    main(
+        [
+            str(perturbed_run),
+            "--out",
+            str(tmp_path / "out"),
+            "--until-perturbation",
+            "distance.queue_size=3",
+        ]
+    )
+    (written,) = list((tmp_path / "out").rglob("eval.json"))
+    assert written.parent.name == "distance.queue_size=3"
+    assert json.loads(written.read_text())["distance"]["by_range"] == pytest.approx(
+        before["distance"]["by_range"], nan_ok=True
+    )
+    from parallax.tools.report.cli import load_run
+
+    assert load_run(written.parent).final_eval() is not None
+    # what was scored, a total each: online, then every rescored eval (held-out grid)
+    from parallax.tools.replay import replay_totals
+
+    totals = replay_totals(replay(perturbed_run))
+    assert list(totals) == ["online", "eval.json", "eval_before/eval.json"]
+    assert totals["eval.json"] == pytest.approx(after["distance"]["by_range"]["total"], nan_ok=True)
+
+
+def test_the_cli_prints_each_runs_totals_and_their_spread(perturbed_run, tmp_path, capsys):
+    from parallax.tools.evaluate import evaluate
+
+    if not (perturbed_run / "eval.json").is_file():
+        evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5])
+    twin = tmp_path / "twin"  # the same run under a second name: two sources, equal totals
+    twin.symlink_to(perturbed_run, target_is_directory=True)
+    main([str(perturbed_run), str(twin), "--out", str(tmp_path / "out"), "distance.queue_size=3"])
+    lines = capsys.readouterr().out.splitlines()
+    per_run = [line for line in lines if ": distance error online " in line]
+    assert len(per_run) == 2 and per_run[0].split(": ", 1)[1] == per_run[1].split(": ", 1)[1]
+    assert "eval.json" in per_run[0]
+    (spread,) = [line for line in lines if "mean ± sd over runs" in line]
+    assert spread.startswith("[replay] distance.queue_size=3, mean ± sd over runs: online ")
+    assert "± 0.00 % (n=2)" in spread
+
+
+def test_evals_without_a_ready_learner_still_give_their_eye_movements():
+    from parallax.tools.replay import _eval_samples
+
+    kept = {"pans": [[0.1, 0.2]], "distances": [4.0]}
+    assert _eval_samples({"greedy_samples": {"grid": kept, "between": kept}}) == {
+        "distance": kept,
+        "distance_between_grid": kept,
+    }
+    assert _eval_samples({"distance": {"by_range": {}, "samples": kept}}) == {"distance": kept}
+    assert _eval_samples({"mae": {}}) == {}
+
+
+def test_replayed_checkpoints_hold_the_replayed_learner(perturbed_run, tmp_path):
+    """As trained, the replay writes the run's own checkpoints back; with another queue size, the
+    checkpoints carry that learner, and parallax-eval on them scores what the replay rescored."""
+    import torch
+
+    from parallax import checkpoint
+    from parallax.tools.evaluate import evaluate
+
+    main([str(perturbed_run), "--out", str(tmp_path / "same")])
+    (same,) = [p.parent for p in (tmp_path / "same").rglob("summary.json")]
+    for name in ("checkpoint.pt", "checkpoint_before_perturbation.pt"):
+        original, replayed = checkpoint.load(perturbed_run / name), checkpoint.load(same / name)
+        for part in ("distance", "coder", "policy"):
+            for key, value in original["experiment"][part].items():
+                if isinstance(value, torch.Tensor):
+                    assert torch.equal(value, replayed["experiment"][part][key]), (name, part, key)
+
+    if not (perturbed_run / "eval.json").is_file():
+        evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5])
+    # (the tiny run's positions are not sensitive, so y would change nothing: c does)
+    main([str(perturbed_run), "--out", str(tmp_path / "other"), "distance.queue_size=4"])
+    (other,) = [p.parent for p in (tmp_path / "other").rglob("summary.json")]
+    rescored = json.loads((other / "eval.json").read_text())["distance"]
+    fresh = evaluate(other, distances=[4.0, 6.0], between=[5.5], out=tmp_path / "fresh")["distance"]
+    assert fresh["by_range"] == pytest.approx(rescored["by_range"], nan_ok=True)
+    trained = evaluate(
+        perturbed_run, distances=[4.0, 6.0], between=[5.5], out=tmp_path / "trained"
+    )["distance"]
+    assert fresh["per_distance"] != trained["per_distance"]  # c = 4 is another learner
