@@ -45,7 +45,7 @@ from parallax.config import (
 )
 from parallax.experiment import seeds_for
 from parallax.metrics import DistanceErrorTracker, learn_online
-from parallax.tools.report.cli import (
+from parallax.tools.report.runs import (
     METRICS_NAME,
     SUMMARY_NAME,
     ReportError,

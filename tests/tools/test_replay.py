@@ -101,7 +101,7 @@ def test_cli_writes_run_like_folders(perturbed_run, tmp_path, capsys):
     assert cfg.distance.queue_size == 4
     assert "distance error" in capsys.readouterr().out
     # parallax-report reads the replays as runs and tables the factor that varies
-    from parallax.tools.report.cli import build_report
+    from parallax.tools.report.build import build_report
 
     text, data = build_report([tmp_path / "out"], out=tmp_path / "report", tables="ablation")
     assert "distance.queue_size" in text
@@ -170,7 +170,7 @@ def test_replayed_learners_are_scored_on_the_evals_eye_movements(perturbed_run, 
     assert json.loads(written.read_text())["distance"]["by_range"] == pytest.approx(
         before["distance"]["by_range"], nan_ok=True
     )
-    from parallax.tools.report.cli import load_run
+    from parallax.tools.report.runs import load_run
 
     assert load_run(written.parent).final_eval() is not None
     # what was scored, a total each: online, then every rescored eval (held-out grid)

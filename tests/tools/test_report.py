@@ -21,7 +21,8 @@ from omegaconf import OmegaConf
 from parallax.tools.report import paper_results as paper
 from parallax.config import compose
 from parallax.metrics import position_label
-from parallax.tools.report.cli import build_report, main
+from parallax.tools.report.build import build_report
+from parallax.tools.report.cli import main
 
 RANGES = paper.DISTANCE_RANGES
 

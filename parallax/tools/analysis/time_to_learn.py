@@ -20,7 +20,7 @@ import numpy as np
 
 from parallax.config import load_run_config
 from parallax.metrics import EyeMovementTracker, position_label
-from parallax.tools.report.cli import read_metrics
+from parallax.tools.report.runs import read_metrics
 
 
 def _target_table(pairs: set[tuple[float, float]]) -> dict[tuple[float, float], float]:

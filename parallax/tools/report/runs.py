@@ -1,0 +1,267 @@
+"""Loading finished runs for `parallax-report`: one job directory of `parallax-train` (its
+config, `summary.json`, `metrics.jsonl` and the `eval.json` files of `parallax-eval`) as a `Run`.
+
+The numbers it reads are the paper's measures: the last-100-trial eye error of Tables 2–3 and
+the distance error per range of Tables 4–5, before and after §5's perturbation. A job directory
+with a config but no summary is a failed or unfinished job: it gets a `problem`, never an
+exception, so that the report can list it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from omegaconf import OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+from yaml import YAMLError
+
+from parallax.config import perturbation_start, run_settings
+from parallax.metrics import position_label
+
+SUMMARY_NAME = "summary.json"
+EVAL_NAME = "eval.json"
+METRICS_NAME = "metrics.jsonl"
+RUN_CONFIG_NAME = "config.yaml"
+HYDRA_CONFIG = Path(".hydra") / "config.yaml"
+HYDRA_OVERRIDES = Path(".hydra") / "overrides.yaml"
+
+
+class ReportError(ValueError):
+    """A bad input (a path that is not a run or multirun directory, an unreadable notes file)."""
+
+
+def relpath(path: Path | str) -> str:
+    """Relative to the working directory when below it (committed reports carry no home paths)."""
+    path = Path(path).resolve()
+    try:
+        return str(path.relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
+def total_error(by_range: dict | None) -> float | None:
+    """The total of a distance error per range (Tables 4–5's last column), if there is one."""
+    return (by_range or {}).get("total")
+
+
+def _load_yaml(path: Path) -> Any:
+    """A YAML file as plain containers, read the way OmegaConf wrote it ('???' stays a string)."""
+    return OmegaConf.to_container(OmegaConf.load(path), resolve=False)
+
+
+def _load_json(path: Path) -> Any:
+    return json.loads(path.read_text())  # the trainer writes NaN for empty ranges; json reads it
+
+
+@dataclass
+class Run:
+    """One job directory: its configuration, summary and evaluations, or why it has none."""
+
+    path: Path
+    config: dict
+    summary: dict | None = None
+    evals: list[dict] = field(default_factory=list)
+    overrides: list[str] = field(default_factory=list)
+    problem: str | None = None  # set for failed or unfinished jobs
+
+    @property
+    def flat(self) -> dict[str, Any]:
+        return run_settings(self.config)
+
+    @property
+    def seed(self) -> Any:
+        return self.config.get("seed")
+
+    @property
+    def lateral_labels(self) -> list[str]:
+        lateral = (self.config.get("curriculum") or {}).get("lateral_positions") or []
+        return [position_label(float(l)) for l in lateral]
+
+    @property
+    def total_presentations(self) -> int | None:
+        value = (self.config.get("train") or {}).get("presentations")
+        return int(value) if isinstance(value, (int, float)) else None
+
+    @property
+    def perturbation_start(self) -> int | None:
+        """Presentation at which the perturbation is switched on (the trainer's rounding)."""
+        return perturbation_start(self.config)
+
+    # Tables 2–3: eye-movement error of the last trials before / after the perturbation.
+    def last_trials(self, phase: str) -> dict | None:
+        if self.summary is None:
+            return None
+        before = self.summary.get("before_perturbation")
+        if phase == "before":
+            if before is not None:
+                return before.get("last_trials")
+            return self.summary.get("last_trials") if self.perturbation_start is None else None
+        return self.summary.get("last_trials") if before is not None else None
+
+    # Tables 4–5: the evaluation that measures the model in this phase, if one was made.
+    def eval_for(self, phase: str) -> dict | None:
+        start = self.perturbation_start
+        if phase == "before":
+            fits = [
+                e
+                for e in self.evals
+                if not e.get("perturbed")
+                and (start is None or int(e.get("presentations", 0)) <= start)
+            ]
+        elif start is None:
+            return None  # never trained under the perturbation: no "after" model
+        else:
+            fits = [e for e in self.evals if e.get("perturbed")]
+        return max(fits, key=lambda e: int(e.get("presentations", 0)), default=None)
+
+    def final_eval(self) -> dict | None:
+        """The evaluation of the final checkpoint in its final state (perturbed or not)."""
+        if self.summary is None:
+            return None
+        ended_perturbed = self.summary.get("before_perturbation") is not None
+        fits = [
+            e
+            for e in self.evals
+            if bool(e.get("perturbed")) == ended_perturbed
+            and int(e.get("presentations", -1)) == int(self.summary.get("presentations", -2))
+        ]
+        return fits[0] if fits else None
+
+    def online_distance(self, phase: str) -> dict | None:
+        if self.summary is None:
+            return None
+        before = self.summary.get("before_perturbation")
+        if phase == "before":
+            if before is not None:
+                return before.get("distance_error") or {}
+            return (
+                (self.summary.get("distance_error") or {})
+                if self.perturbation_start is None
+                else None
+            )
+        return (self.summary.get("distance_error") or {}) if before is not None else None
+
+
+def _is_run_dir(path: Path) -> bool:
+    return (path / RUN_CONFIG_NAME).is_file() or (path / HYDRA_CONFIG).is_file()
+
+
+def find_run_dirs(path: str | Path) -> list[Path]:
+    """The run directories at or below `path`; a ReportError when there are none."""
+    path = Path(path)
+    if not path.exists():
+        raise ReportError(f"{path} does not exist")
+    if not path.is_dir():
+        raise ReportError(f"{path} is not a directory (give a run or multirun directory)")
+    if _is_run_dir(path):
+        return [path]
+    found = []
+    for dirpath, dirnames, _ in os.walk(path):
+        # .hydra, .submitit and TensorBoard folders hold no runs
+        dirnames[:] = sorted(d for d in dirnames if not d.startswith(".") and d != "tb")
+        here = Path(dirpath)
+        if here != path and _is_run_dir(here):
+            found.append(here)
+            dirnames[:] = []
+    if not found:
+        raise ReportError(
+            f"{path} is not a run or multirun directory: no {RUN_CONFIG_NAME} "
+            f"(or {HYDRA_CONFIG}) in it or below it"
+        )
+    return found
+
+
+def _progress(path: Path, total: int | None) -> str:
+    """'12 of 400 presentations logged' from the last line of metrics.jsonl."""
+    metrics = path / METRICS_NAME
+    done = 0
+    if metrics.is_file():
+        lines = [line for line in metrics.read_text().splitlines() if line.strip()]
+        if lines:
+            try:
+                done = int(json.loads(lines[-1]).get("presentation", 0))
+            except (json.JSONDecodeError, AttributeError, TypeError, ValueError):
+                done = 0
+    of = f" of {total}" if total is not None else ""
+    checkpoint = "; checkpoint.pt present, resumable" if (path / "checkpoint.pt").is_file() else ""
+    return f"{done}{of} presentations logged{checkpoint}"
+
+
+def eval_files(path: Path) -> list[Path]:
+    """eval.json in the run directory and one level below (parallax-eval --out RUN/SUBDIR)."""
+    files = [path / EVAL_NAME] if (path / EVAL_NAME).is_file() else []
+    for sub in sorted(
+        p for p in path.iterdir() if p.is_dir() and not p.name.startswith(".") and p.name != "tb"
+    ):
+        if (sub / EVAL_NAME).is_file():
+            files.append(sub / EVAL_NAME)
+    return files
+
+
+def load_run(path: Path) -> Run:
+    """Read one job directory; problems become `Run.problem`, not exceptions."""
+    overrides: list[str] = []
+    if (path / HYDRA_OVERRIDES).is_file():
+        try:
+            overrides = [str(o) for o in (_load_yaml(path / HYDRA_OVERRIDES) or [])]
+        except (YAMLError, OmegaConfBaseException):
+            overrides = []
+    started = (path / RUN_CONFIG_NAME).is_file()
+    config_path = path / RUN_CONFIG_NAME if started else path / HYDRA_CONFIG
+    try:
+        config = _load_yaml(config_path)
+    except (YAMLError, OmegaConfBaseException) as exc:
+        return Run(
+            path,
+            {},
+            overrides=overrides,
+            problem=f"unreadable {config_path.name}: {str(exc).splitlines()[0]}",
+        )
+    if not isinstance(config, dict):
+        return Run(path, {}, overrides=overrides, problem=f"{config_path} is not a mapping")
+    run = Run(path, config, overrides=overrides)
+    if not started:
+        run.problem = "failed before training started (no config.yaml from the trainer)"
+        return run
+    summary_path = path / SUMMARY_NAME
+    if not summary_path.is_file():
+        run.problem = (
+            f"failed or unfinished: no {SUMMARY_NAME}; {_progress(path, run.total_presentations)}"
+        )
+        return run
+    try:
+        run.summary = _load_json(summary_path)
+    except json.JSONDecodeError as exc:
+        run.problem = f"unreadable {SUMMARY_NAME}: {exc}"
+        return run
+    done, total = run.summary.get("presentations"), run.total_presentations
+    if total is not None and isinstance(done, int) and done < total:
+        run.problem = f"unfinished: {SUMMARY_NAME} covers {done} of {total} presentations"
+        run.summary = None
+        return run
+    for eval_path in eval_files(path):
+        try:
+            result = _load_json(eval_path)
+        except json.JSONDecodeError:
+            continue  # an eval being written right now; the report uses the summary instead
+        result["_path"] = str(eval_path)
+        run.evals.append(result)
+    return run
+
+
+def read_metrics(path: Path) -> list[dict]:
+    """metrics.jsonl's records; a torn last line (a run killed while writing) is skipped."""
+    metrics = path / METRICS_NAME
+    if not metrics.is_file():
+        return []
+    records = []
+    for line in metrics.read_text().splitlines():
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return records
