@@ -1,0 +1,94 @@
+"""The experiment files are the record of every result: the paper's algorithm as written
+(conf/experiment/paper_*.yaml) and our recipe (recipe_*.yaml, quickstart.yaml)."""
+
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+
+from parallax.config import RESULT_NEUTRAL_KEYS, compose, flatten, validate
+
+EXPERIMENTS = Path(__file__).resolve().parents[1] / "conf" / "experiment"
+SETUPS = [
+    "single_5",
+    "single_7",
+    "single_10",
+    "single_13",
+    "single_15",
+    "single_20",
+    "multi_5_10",
+    "multi_5_20",
+    "multi_5_20_weighted",
+]
+CHECKPOINTS = Path(__file__).resolve().parents[1] / "docs" / "results" / "checkpoints"
+
+
+def _flat(overrides):
+    cfg = compose(overrides)
+    validate(cfg)
+    return flatten(OmegaConf.to_container(cfg, resolve=True))
+
+
+def test_every_setup_has_both_families_and_nothing_else():
+    names = sorted(p.stem for p in EXPERIMENTS.glob("*.yaml"))
+    expected = sorted(
+        [f"paper_{s}" for s in SETUPS]
+        + [f"recipe_{s}" for s in SETUPS]
+        + ["paper_algorithm", "quickstart"]
+    )
+    assert names == expected
+
+
+@pytest.mark.parametrize("setup", SETUPS)
+def test_the_paper_family_uses_nothing_beyond_the_paper(setup):
+    flat = _flat([f"experiment=paper_{setup}"])
+    assert flat["policy.feature_norm"] == "none"
+    assert flat["policy.eye_position_reference_m"] == 0
+    assert flat["policy.reward_change_gain"] == 0
+    assert flat["policy.discount"] == 1.0  # algorithm 3's average-reward TD error
+    assert flat["policy.weight_decay"] == 0 and flat["policy.actor_projection_radius"] > 0
+    assert flat["env.initial_pan_jitter_deg"] == 0
+    assert flat["env.stimuli.count"] == 100
+    assert flat["distance.lm.weight_decay"] == 0
+    assert flat["distance.queue_size"] == 300
+    assert flat["train.distance_readout"] == "last"
+    assert flat["perturbation.start_fraction"] == 0.5
+
+
+@pytest.mark.parametrize("setup", SETUPS)
+def test_the_two_families_differ_only_in_the_algorithm_and_its_budget(setup):
+    paper, recipe = _flat([f"experiment=paper_{setup}"]), _flat([f"experiment=recipe_{setup}"])
+    same = ("curriculum.lateral_positions", "distance.weighting", "perturbation.blur_sigma")
+    for key in same:
+        assert paper[key] == recipe[key], key
+
+
+def test_plain_parallax_train_runs_the_recipe():
+    plain, quickstart = _flat([]), _flat(["experiment=quickstart"])
+    recipe_keys = (
+        "policy.feature_norm",
+        "policy.reward_change_gain",
+        "policy.eye_position_reference_m",
+        "env.initial_pan_jitter_deg",
+        "distance.lm.weight_decay",
+        "train.distance_readout",
+        "distance.y",
+    )
+    recipe = _flat(["experiment=recipe_multi_5_20_weighted"])
+    for key in recipe_keys:
+        assert plain[key] == recipe[key] == quickstart[key], key
+
+
+@pytest.mark.parametrize("run", sorted(p.name for p in CHECKPOINTS.glob("*_seed*")))
+def test_the_committed_models_are_reproduced_by_one_experiment_name(run):
+    """Each committed checkpoint's saved config is what `experiment=recipe_… seed=n` composes."""
+    saved_cfg = OmegaConf.load(CHECKPOINTS / run / "config.yaml")
+    saved = flatten(OmegaConf.to_container(saved_cfg, resolve=True))
+    setup, seed = run.rsplit("_seed", 1)
+    current = _flat([f"experiment=recipe_{setup}", f"seed={seed}"])
+    differ = {
+        key: (saved.get(key), current.get(key))
+        for key in set(saved) | set(current)
+        if key not in RESULT_NEUTRAL_KEYS and saved.get(key) != current.get(key)
+    }
+    assert differ == {}
