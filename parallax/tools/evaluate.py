@@ -27,7 +27,6 @@ import numpy as np
 import torch
 
 from parallax import checkpoint
-from parallax.tools import plots
 from parallax.config import (
     DISTANCE_READOUTS,
     READOUT_PANS,
@@ -38,6 +37,7 @@ from parallax.config import (
 )
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
+from parallax.tools import plots
 
 
 def grid(start: float, stop: float, step: float) -> list[float]:
@@ -71,7 +71,7 @@ def run_jobs(
 
 def mae_by_start(run: dict[str, np.ndarray]) -> dict[str, float]:
     """Eye MAE of the trials that started short of α* or on it (the paper's start at pan 0 always
-    does) and of those that started past it (only a random start can), with the share of the latter."""
+    does) and of those that started past it (only a random start can), with the latter's share."""
     err = np.abs(run["pans"] - run["targets"])
     past = (run["start_pans"] - run["targets"]) * np.sign(run["targets"]) > 0
     out = {"share_started_past": float(past.mean())}
@@ -131,7 +131,8 @@ def evaluate(
             "pass --device cpu"
         )
     if int(cfg.train.threads) > 0:
-        # as in training: a second intra-op thread made a loaded 2-core machine ~30× slower
+        # as in training: the matrices are small, and extra intra-op threads contend for the
+        # cores the world and the coder's helper threads use (docs/performance.md)
         torch.set_num_threads(int(cfg.train.threads))
     ckpt_path = run_dir / checkpoint_name
     if not ckpt_path.is_file():

@@ -193,7 +193,7 @@ def ablation_bars(
 
 
 def learning_curves_by_robots(curves: dict[str, dict], path: str | Path, trials: int) -> Path:
-    """Worst-position recent MAE against robot-iterations and against wall time (issue 7's B = 1
+    """Worst-position recent MAE against robot-iterations and against wall time (e.g. B = 1
     against B = 16): one line per run, from parallax.tools.analysis.time_to_learn.learning_curve."""
     fig, (by_steps, by_time) = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
     for label, curve in curves.items():
@@ -210,8 +210,8 @@ def learning_curves_by_robots(curves: dict[str, dict], path: str | Path, trials:
 
 def pursuit_landscape(results: dict[str, dict], path: str | Path) -> Path:
     """The policy's mean pan step E_π[a] and the reward against the pan's offset from α*, one line
-    per run (``python -m parallax.tools.analysis.landscape RUN... --plot``): where E_π[a] has the sign of the
-    offset, the eye is pushed further away from the target."""
+    per run (``python -m parallax.tools.analysis.landscape RUN... --plot``): where E_π[a] has the
+    sign of the offset, the eye is pushed further away from the target."""
     fig, (steps, rewards) = plt.subplots(1, 2, figsize=(11, 4), sharex=True)
     for label, result in results.items():
         steps.plot(result["offsets_deg"], result["mean_step_deg"], label=label)

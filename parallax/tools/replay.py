@@ -4,11 +4,12 @@ The distance learner never acts on the world: the eye-movement vectors s it sees
 the world, the coder and the policy. So a run's metrics.jsonl, which logs every s with its true
 distance in order, lets the learner be re-run with another weighting y, queue size c, weighting
 on/off or readout (``train.distance_readout``: each trial's last and best-encoded pans are both
-logged), and the result is exactly what `parallax-train` would have reported with that setting and
-the same seed (tests/tools/test_replay.py checks this bit for bit). That makes the y, c and weighting
-ablations of Table 4 cost seconds per setting instead of a full run each.
+logged), and the result is exactly what `parallax-train` would have reported with that setting
+and the same seed (tests/tools/test_replay.py checks this bit for bit). That makes the y, c and
+weighting ablations of Table 4 cost seconds per setting instead of a full run each.
 
-    parallax-replay SOURCE_RUN_OR_MULTIRUN --out DIR distance.y=0,0.5,1,2 distance.queue_size=100,300
+    parallax-replay SOURCE_RUN_OR_MULTIRUN --out DIR distance.y=0,0.5,1,2
+        distance.queue_size=100,300
     parallax-replay … --until-perturbation     # only the part before §5's perturbation
 
 Each source run × each combination of the comma-separated values becomes DIR/<run>/<overrides>/
@@ -60,7 +61,8 @@ class ReplayError(ValueError):
 
 
 def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
-    """['distance.y=1,2', 'distance.weighting=false'] → every combination as a list of dotlist items."""
+    """['distance.y=1,2', 'distance.weighting=false'] → every combination, each a list of dotlist
+    items."""
     axes = []
     for item in overrides:
         key, sep, values = item.partition("=")
@@ -336,8 +338,8 @@ def main(argv: list[str] | None = None) -> None:
         if len(sources) > 1:
             for combo, scored in totals.items():
                 spread = {
-                    what: f"{statistics.fmean(v):.2f} ± {statistics.stdev(v) if len(v) > 1 else 0.0:.2f} % "
-                    f"(n={len(v)})"
+                    what: f"{statistics.fmean(v):.2f} ± "
+                    f"{statistics.stdev(v) if len(v) > 1 else 0.0:.2f} % (n={len(v)})"
                     for what, v in scored.items()
                 }
                 print(

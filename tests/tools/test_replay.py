@@ -15,7 +15,8 @@ from parallax.tools.replay import ReplayError, main, parse_sweep, replay
 def perturbed_run(tmp_path_factory):
     from tests.conftest import train_tiny_run
 
-    # 8 presentations, queue c = 3, weighting on, perturbation from presentation 4
+    # 8 presentations, queue c = 3, weighting on, perturbation from presentation 4; the paper's
+    # readout (each trial's last pan), so that a test can replay it with the other one
     return train_tiny_run(
         tmp_path_factory.mktemp("run"),
         [
@@ -24,6 +25,7 @@ def perturbed_run(tmp_path_factory):
             "distance.y=1.0",
             "perturbation=rotate_blur",
             "perturbation.start_fraction=0.5",
+            "train.distance_readout=last",
         ],
     )
 

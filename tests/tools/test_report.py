@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from omegaconf import OmegaConf
 
-from parallax.tools.report import paper_results as paper
 from parallax.config import compose
 from parallax.metrics import position_label
+from parallax.tools.report import paper_results as paper
 from parallax.tools.report.build import build_report
 from parallax.tools.report.cli import main
 
@@ -376,7 +376,8 @@ PAPER = Path(__file__).resolve().parents[3] / "shared" / "paper.md"
 
 @pytest.mark.skipif(not PAPER.is_file(), reason="the paper's text is not beside the repository")
 def test_paper_results_are_the_papers_tables():
-    """parallax/tools/report/paper_results.py against the tables in ../shared/paper.md, cell by cell."""
+    """parallax/tools/report/paper_results.py against the tables of ../shared/paper.md, cell by
+    cell."""
     text = PAPER.read_text()
 
     def lines_after(title: str) -> list[str]:

@@ -1,4 +1,5 @@
-"""python -m parallax.tools.analysis.time_to_learn: the first presentation with a recent MAE ≤ target everywhere."""
+"""python -m parallax.tools.analysis.time_to_learn: the first presentation with a recent MAE ≤
+target everywhere."""
 
 from __future__ import annotations
 

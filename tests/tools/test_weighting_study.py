@@ -5,12 +5,12 @@ import json
 import numpy as np
 import pytest
 
+from parallax.distance.weighting import sensitive_positions
 from parallax.tools.analysis.synthetic_pans import (
     PAPER_DISTANCES_M,
     PAPER_LATERAL_POSITIONS_M,
     parallax_pans,
 )
-from parallax.distance.weighting import sensitive_positions
 from parallax.tools.analysis.weighting_study import (
     NO_WEIGHTING,
     NOISE_PATTERNS,

@@ -67,7 +67,8 @@ def main(argv: list[str] | None = None) -> None:
     print("|---|---|---|---|")
     for label, b in baselines.items():
         print(
-            f"| {label} | {b['pan_zero']:.3f} | {b['best_constant']:.3f} | {b['best_constant_pan']:.3f} |"
+            f"| {label} | {b['pan_zero']:.3f} | {b['best_constant']:.3f} | "
+            f"{b['best_constant_pan']:.3f} |"
         )
 
 

@@ -1,13 +1,16 @@
-"""Where does the eye image best match I0? A check of the world behind Tables 2–3 (paper §3.4, §4.2).
+"""Where does the eye image best match I0? A check of the world behind Tables 2–3 (paper §3.4,
+§4.2).
 
 The pursuit policy is rewarded for pans that make I(t) easy to encode together with I0. If the
 pixels themselves matched best away from the target pan α* (for instance because the still
 background, which has a smaller parallax than the panel, filled part of a window), no learner
-could reach the paper's MAE. This module renders each scale's window (grey and pyramid-subsampled
-by `parallax.coding.retina`, the coder's configured scales) over a sweep of pans around α* and reports the pan of the
-smallest mean squared difference from I0, relative to α*.
+could reach the paper's MAE. This module renders each scale's window (grey and
+pyramid-subsampled by `parallax.coding.retina`, the coder's configured scales) over a sweep of
+pans around α* and reports the pan of the smallest mean squared difference from I0, relative to
+α*.
 
-    python -m parallax.tools.analysis.best_match [--distances 3 6.5 10] [--lateral 0.2] [--textures 6]
+    python -m parallax.tools.analysis.best_match [--distances 3 6.5 10] [--lateral 0.2]
+        [--textures 6]
 """
 
 from __future__ import annotations
@@ -28,15 +31,17 @@ def scale_specs() -> dict[str, ScaleSpec]:
 
 
 def window(image: np.ndarray, spec: ScaleSpec) -> np.ndarray:
-    """The scale's central window of an RGB eye image, grey and pyramid-subsampled as the retina does."""
+    """The scale's central window of an RGB eye image, grey and pyramid-subsampled as the retina
+    does."""
     # a copy: the task hands out I0 read-only, and torch warns about wrapping such arrays
     gray = centre_window(as_gray_batch(image[None].copy()), spec.window)
     return pyramid_down(gray, spec.pyramid_levels)[0].numpy()
 
 
 def views_around_target(env, texture: int, distance: float, lateral: float, offsets: np.ndarray):
-    """Shows ``texture`` at ``distance``, puts the robot at ``lateral`` and returns (I0, α*, frames):
-    the left eye's image at each pan α* + offset (degrees). Shared with parallax.tools.analysis.landscape."""
+    """Shows ``texture`` at ``distance``, puts the robot at ``lateral`` and returns (I0, α*,
+    frames): the left eye's image at each pan α* + offset (degrees). Shared with
+    parallax.tools.analysis.landscape."""
     env.task.set_next_stimulus(texture_index=texture, distance=distance)
     reference = env.reset().observation["reference"]
     physics = env.physics
@@ -59,7 +64,8 @@ def best_match_offsets(
     step_deg: float = 0.05,
     seed: int = 0,
 ) -> dict[str, list[float]]:
-    """scale → per texture, argmin over pans of MSE(window(I(pan)), window(I0)) minus α*, degrees."""
+    """scale → per texture, argmin over pans of MSE(window(I(pan)), window(I0)) minus α*, in
+    degrees."""
     env = parallax.envs.load(seed=seed, lateral_positions=[lateral], trial_length=30)
     specs = scale_specs()
     offsets: dict[str, list[float]] = {name: [] for name in specs}

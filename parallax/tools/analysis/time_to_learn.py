@@ -1,12 +1,13 @@
-"""`python -m parallax.tools.analysis.time_to_learn RUN...`: when a run's eye first met an MAE target at every
-lateral position (the speed issue's "time to learn"; the MAE is |q_p − α*| of eq. 16, over the
-last ``trials`` trials of each position, as in Tables 2–3).
+"""`python -m parallax.tools.analysis.time_to_learn RUN...`: when a run's eye first met an MAE
+target at every lateral position (its "time to learn"; the MAE is |q_p − α*| of eq. 16, over
+the last ``trials`` trials of each position, as in Tables 2–3).
 
 It reads `metrics.jsonl`: per-position recent MAEs where the trainer logged them
-(``mae_recent_per_position``, over metrics.summary_trials trials), else recomputes them from the logged pans with the world's α*
-for each (distance, lateral position). Only the part before §5's perturbation counts. Wall time
-is the TensorBoard events' clock at that presentation, minus the first event's, plus one
-presentation's mean duration (a resumed run's pause would count, so use uninterrupted runs).
+(``mae_recent_per_position``, over metrics.summary_trials trials), else recomputes them from
+the logged pans with the world's α* for each (distance, lateral position). Only the part before
+§5's perturbation counts. Wall time is the TensorBoard events' clock at that presentation, minus
+the first event's, plus one presentation's mean duration (a resumed run's pause would count, so
+use uninterrupted runs).
 """
 
 from __future__ import annotations
@@ -284,7 +285,8 @@ def main(argv: list[str] | None = None) -> int:
         )
         if r["presentation"] is None:
             print(
-                f"{r['run_dir']}: not reached in {r['presentations_seen']} presentations ({worst_text})"
+                f"{r['run_dir']}: not reached in {r['presentations_seen']} presentations "
+                f"({worst_text})"
             )
         else:
             wall = (
@@ -329,7 +331,8 @@ def _print_spread(spread: dict) -> None:
     runaways = {k: v for k, v in spread.items() if v["runaway_share"] > 0}
     if runaways:
         print(
-            "  runaways past the target / their mean signed error (+ past α*, − short or the wrong way): "
+            "  runaways past the target / their mean signed error (+ past α*, − short or the wrong "
+            "way): "
             + "  ".join(
                 f"{k} cm {100 * v['past_share']:.0f}%/{v['runaway_signed_mean']:+.2f}°"
                 for k, v in runaways.items()

@@ -4,8 +4,8 @@ The paper weighs the rows of S that come from sensitive lateral positions (15–
 L = 5…20 cm: their disparity score at 3 m reaches the effective patch size) by
 w_k = 1/((1 + l_r − l_k)·y), because "generating eye movement at those positions is more
 difficult": their pans are the unreliable ones. Tables 4–5 show the weighting helping. Our own
-5–20 cm eye is as accurate at the sensitive positions as elsewhere, and there the weighting did
-not help (docs/results/README.md).
+5–20 cm eye is as accurate at the sensitive positions as elsewhere, and there the weighting does
+not help (docs/results/README.md, docs/improvements.md).
 
 This module separates the two by feeding the distance learner (`DistanceLearner`, the same
 queue, scaling, network and Levenberg–Marquardt as training) pans made by the geometry,
@@ -207,7 +207,8 @@ def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
 def markdown(summary: Sequence[dict[str, object]]) -> str:
     """A table: one row per pattern and weighting."""
     lines = [
-        "| noise pattern | weighting | distance error (mean ± sd over seeds) | against none (paired) "
+        "| noise pattern | weighting | distance error (mean ± sd over seeds) | against none "
+        "(paired) "
         "| seeds where it helps |",
         "|---|---|---|---|---|",
     ]
@@ -221,7 +222,8 @@ def markdown(summary: Sequence[dict[str, object]]) -> str:
             else f"{cell['seeds_better_than_none']} of {cell['n']}"
         )
         lines.append(
-            f"| {cell['pattern']} | {cell['weighting']} | {cell['mean_pct']:.2f} ± {cell['sd_pct']:.2f} % "
+            f"| {cell['pattern']} | {cell['weighting']} | {cell['mean_pct']:.2f} ± "
+            f"{cell['sd_pct']:.2f} % "
             f"| {against} | {helps} |"
         )
     return "\n".join(lines)
