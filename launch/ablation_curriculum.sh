@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 9 ablation — the curriculum (paper §3.2, Fig. 2): a single lateral position of 20 cm, the
+# Ablation — the curriculum (paper §3.2, Fig. 2): a single lateral position of 20 cm, the
 # multiple positions 5–20 cm from the start (the paper), and the staged list that widens from
 # 5–10 cm once the pursuit is good enough (beyond the paper), three seeds each.
 # Extra arguments are Hydra overrides for every job, e.g.  bash launch/ablation_curriculum.sh train.presentations=800

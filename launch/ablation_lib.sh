@@ -11,7 +11,7 @@
 #   px_report OUT NAME TITLE TABLES SWEEP_DIR...   parallax-report into OUT/NAME.
 #   px_distance_source ARGS...   the finished runs whose logged eye movements the distance-learner
 #                                ablations (y, c, weighting) replay, in the array distance_sources:
-#                                $SOURCE if set (a glob, e.g. 'outputs/multirun/reproduce/*multi_5_20_weighted*'),
+#                                $SOURCE if set (a glob, e.g. 'outputs/multirun/reproduce_recipe/*multi_5_20_weighted*'),
 #                                else the default experiment trained for SEEDS (plus ARGS) into
 #                                $SWEEP_ROOT/ablation_distance_source.
 #   px_replay OUT ARGS...        parallax-replay the distance sources into OUT with distance.* ARGS

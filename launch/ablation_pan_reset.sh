@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Issue 9 ablation — the pan at each new lateral position: reset to 0 (the paper) or kept from
-# the previous position, three seeds each, on the default experiment (5–20 cm with weighting).
+# Ablation — the pan at each new lateral position: reset to 0 (the paper) or kept from the
+# previous position, three seeds each, on the default configuration (our recipe, 5–20 cm with
+# weighting).
 # Extra arguments are Hydra overrides for every job. Report: docs/results/ablations/pan_reset.md.
 # Environment settings: launch/ablation_lib.sh.
 set -euo pipefail

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 9 — the queue size c of eq. (9) on the default curriculum (5–20 cm), three seeds. Like
+# Ablation — the queue size c of eq. (9) on the default curriculum (5–20 cm), three seeds. Like
 # launch/ablation_y.sh, the eye movements of one run per seed are replayed through distance
 # learners with each c (parallax-replay). A c larger than the presentations replayed never fills
 # and has no distance error: the report shows it empty, which is the finding.

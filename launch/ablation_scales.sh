@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Issue 9 ablation — the sensory coder's scales (paper §3.3): coarse only, fine only, both (the
-# paper's), three seeds each, on the default experiment (5–20 cm with weighting).
+# Ablation — the sensory coder's scales (paper §3.3): coarse only, fine only, both (the
+# paper's), three seeds each, on the default configuration (our recipe, 5–20 cm with weighting).
 # Extra arguments are Hydra overrides for every job, e.g.
 #     bash launch/ablation_scales.sh train.presentations=800
 # Then parallax-eval on each run and the report docs/results/ablations/scales.md (figures and

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 9 — the weighting hyper-parameter y of eq. (12), and weighting off, on the default
+# Ablation — the weighting hyper-parameter y of eq. (12), and weighting off, on the default
 # curriculum (5–20 cm), three seeds. y only changes the distance learner, which never acts on the
 # world, so the eye movements of one run per seed are replayed through learners with each y
 # (parallax-replay: bit-identical to training that setting). Extra arguments are overrides of

@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
-# Issue 9 — the three ablations the committed docs/results/ablations.md reports, three seeds each
-# on the default curriculum (5–20 cm): the scales (trained, ablation_scales.sh), the weighting
-# y and the queue size c (replayed, ablation_y.sh / ablation_queue.sh). Then ablations.md: the
-# hand-written reading (docs/results/ablations_notes.md) followed by each report's tables and
-# plots (docs/results/ablations/*.md).
+# The three ablations of docs/results/ablations.md, three seeds each on the default curriculum
+# (5–20 cm): the scales (trained, ablation_scales.sh), the weighting y and the queue size c
+# (replayed, ablation_y.sh / ablation_queue.sh). Then ablations.md: the hand-written reading
+# (docs/results/ablations_notes.md) followed by each report's tables and plots
+# (docs/results/ablations/*.md).
 #   SCALES_ARGS   overrides of the scale runs (default: train.presentations=60, the committed budget)
-#   SOURCE        runs whose eye movements the y / c ablations replay (default, as committed: the
-#                 5–20 cm weighted runs of launch/reproduce.sh, cut at their perturbation)
+#   SOURCE        runs whose eye movements the y / c ablations replay (default: the 5–20 cm
+#                 weighted runs of launch/reproduce.sh, cut at their perturbation)
 set -euo pipefail
 here="$(dirname "${BASH_SOURCE[0]}")"
 status=0
@@ -15,9 +15,8 @@ PARALLAX_EVAL="${PARALLAX_EVAL:-0}" bash "$here/ablation_scales.sh" "${scales_ar
 if [[ -z "${SOURCE:-}" ]]; then
   # shellcheck disable=SC1091
   source "$here/ablation_lib.sh"
-  SOURCE="$(px_runs_with "$(px_sweep_dir reproduce)" experiment=paper_multi_5_20_weighted | tr '\n' ' ')"
-  # the committed ablations.md replayed the session-3 runs (now outputs/multirun/s4_reproduce)
-  export SOURCE="${SOURCE:-$(px_sweep_dir reproduce)/<runs with experiment=paper_multi_5_20_weighted>}"
+  SOURCE="$(px_runs_with "$(px_sweep_dir reproduce_recipe)" experiment=recipe_multi_5_20_weighted | tr '\n' ' ')"
+  export SOURCE="${SOURCE:-$(px_sweep_dir reproduce_recipe)/<runs with experiment=recipe_multi_5_20_weighted>}"
 fi
 bash "$here/ablation_y.sh" || status=$?
 bash "$here/ablation_queue.sh" || status=$?
@@ -28,7 +27,7 @@ if [[ -z "${PARALLAX_DRY_RUN:-}" ]]; then
 import re, sys
 from pathlib import Path
 root = Path(sys.argv[1])
-parts = ["# Ablations: what each part buys (issue 9)", ""]
+parts = ["# Ablations: what each part buys", ""]
 notes = root / "ablations_notes.md"
 if notes.is_file():
     parts += [notes.read_text().strip(), ""]

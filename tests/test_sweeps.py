@@ -350,5 +350,5 @@ def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_pat
     assert len(trained) == 1 and "coder=coarse\\,fine\\,two_scale" in trained[0]
     assert trained[0].rstrip().endswith("train.presentations=60")
     replays = [l for l in lines if l.startswith("parallax-replay ")]
-    assert len(replays) == 3 and all(f"{tmp_path}/reproduce/" in l for l in replays)
+    assert len(replays) == 3 and all(f"{tmp_path}/reproduce_recipe/" in l for l in replays)
     assert len([l for l in lines if l.startswith("parallax-report ")]) == 3
