@@ -7,15 +7,15 @@ each lateral position l_p of L, t_h iterations of
 
 and the pan reached at the last iteration is q_p. The vector s = [q1 … qr] and the distance go
 to the distance learner. This module builds the four parts from a composed config and runs
-presentations; `parallax.trainer` adds the schedule, metrics, logging and checkpoints, and
-`parallax.tools.evaluate` the frozen measurements.
+presentations (:meth:`Experiment.run_presentation`, the loop; :mod:`parallax.lockstep` schedules
+its steps on threads); `parallax.trainer` adds the schedule, metrics, logging and checkpoints,
+and `parallax.tools.evaluate` the frozen measurements.
 """
 
 from __future__ import annotations
 
-from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
-from typing import Any
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -24,9 +24,9 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 import parallax.envs
-from parallax.coding import CoderOutput, Encoding
+from parallax.coding import CoderOutput
+from parallax.lockstep import Lockstep, stack_images
 from parallax.metrics import position_label
-from parallax.policy.features import REFERENCE_MODE
 
 
 @dataclass
@@ -61,16 +61,6 @@ def seeds_for(seed: int, count: int) -> list[int]:
 class Experiment:
     """The world(s), coder, policy and distance learner of one run, built from a config."""
 
-    #: Robots whose frames are encoded together in a lockstep (the last chunk may be smaller): 2–4
-    #: was fastest at B = 16 on 2 cores (about 260 robot-iterations/s, against 204 for one chunk
-    #: of 16 and 239 for chunks of 1: small chunks overlap more with rendering but cost more calls).
-    ENCODE_CHUNK = 4
-    #: Start each iteration's dictionary step on the coder's helper thread as soon as its frames
-    #: are encoded, so that it runs during the policy's turn (when only this thread works) and
-    #: the render; False: on this thread once the actions are sent. Same numbers either way
-    #: (tests/test_experiment.py); it takes 1.4–2.3 ms of CPU per step off this thread at B = 1.
-    EARLY_DICTIONARY_STEP = True
-
     def __init__(self, cfg: DictConfig, stimuli_split: str | None = None):
         self.cfg = cfg
         self.device = torch.device(cfg.device)
@@ -78,11 +68,10 @@ class Experiment:
             raise RuntimeError(
                 "device=cuda was asked for but torch sees no CUDA device; use device=cpu"
             )
-        # OpenCV's calls in a step (the retina's cvtColor and pyrDown, the §5 blur) take tens of
-        # µs on images this small, and between them its worker thread spun: 0.8–0.9 ms of CPU per
-        # step at B = 1 (per-thread CPU times, two runs each way), taken from the threads that
-        # render and encode. Without workers the calls run here; their results are the same
-        # (tests/coding/test_retina.py).
+        # OpenCV's calls in a step (the retina's cvtColor and pyrDown, the §5 blur) are tiny on
+        # images this small, and between them its worker threads spin on the cores that render
+        # and encode. Without workers each call runs on its caller's thread, with the same
+        # results (tests/coding/test_retina.py).
         cv2.setNumThreads(0)
         self.lateral_positions = [float(l) for l in cfg.curriculum.lateral_positions]
         stages = cfg.curriculum.get("stages") or [self.lateral_positions]
@@ -145,194 +134,52 @@ class Experiment:
                 blur_sigma=float(p.blur_sigma) if on else 0.0,
             )
 
-    # --- one presentation ------------------------------------------------------------------
-    def _images(self, observations: list[dict], key: str) -> torch.Tensor:
-        return torch.from_numpy(np.stack([o[key] for o in observations])).to(self.device)
-
-    @property
-    def uses_reference_states(self) -> bool:
-        """The policy sees θ(t) − θ_ref (``policy.feature_norm=difference``, beyond the paper)."""
-        return self.policy.feature_norm == REFERENCE_MODE
-
-    def reference_states(self, reference: torch.Tensor) -> torch.Tensor:
-        """θ_ref (B, state_dim): the pooled activity of (I0, I0), the stimulus at zero disparity,
-        with the current dictionaries and without learning (the coder's reference must be set)."""
-        return self.coder(reference, learn=False).state
-
-    def policy_state(
-        self,
-        theta: torch.Tensor,
-        reference_state: torch.Tensor | None,
-        pans_deg: np.ndarray,
-        lateral_m: float,
-        reward_change: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-    ) -> torch.Tensor:
-        """What the policy acts on: θ (B, state_dim), minus θ_ref with ``feature_norm=difference``,
-        then the eye-position entry when ``policy.eye_position_reference_m`` > 0, then the
-        reward-change entry when ``policy.reward_change_gain`` > 0 (all three beyond the paper),
-        for the robots' pans (B,) at their shared lateral position. ``reward_change`` is
-        (rewards, previous rewards, previous pan increments), each (B,); None: no previous step
-        (the entry is 0)."""
-        state = theta if reference_state is None else theta - reference_state
-        extra = []
-        if self.policy.eye_position_dims:
-            pans = torch.as_tensor(np.asarray(pans_deg, dtype=np.float64))
-            extra.append(self.policy.eye_position_feature(pans, lateral_m))
-        if self.policy.reward_change_dims:
-            if reward_change is None:
-                extra.append(
-                    torch.zeros(
-                        state.shape[0],
-                        1,
-                        dtype=self.policy.actor.dtype,
-                        device=self.policy.actor.device,
-                    )
-                )
-            else:
-                extra.append(self.policy.reward_change_feature(*reward_change))
-        return torch.cat([state, *[e.to(state.dtype) for e in extra]], dim=1) if extra else state
-
+    # --- one presentation: the paper's loop -----------------------------------------------
     def run_presentation(
         self, learn: bool = True, greedy: bool = False, keep_view: bool = False
     ) -> Presentation:
-        """All robots live through one presentation; learning on or frozen.
+        """All robots live through one presentation (paper §3.2, Fig. 3); learning on or frozen.
 
-        The worlds step on the GL thread (:func:`parallax.envs.gl_thread`) while this thread
-        works: the dictionary step of iteration t runs on the coder's helper thread (CPU) while
-        the policy learns and acts and the frames of t + 1 render, and the robots' frames are
-        encoded chunk by chunk as they arrive. Every value is computed as in
-        the plain sequence render → encode → policy → dictionary step, in the same order per
-        robot and per dictionary, so the results do not depend on it (tests/test_experiment;
-        with one torch thread, ``train.threads=1``, the default: with more, the matrix library
-        may split a product of a chunk's rows otherwise than one of all rows).
+        Each iteration: the robots' images are encoded (state θ, reward −(eC+eF)), the policy
+        learns from the step into them and acts, and the dictionaries take their step. A
+        :class:`~parallax.lockstep.Lockstep` runs the worlds and the dictionary step on other
+        threads meanwhile; every number is that of the plain sequence.
         """
         learn_dictionaries = learn and self.coder.learn
-        world = parallax.envs.gl_thread()
-        futures = [world.submit(env.reset) for env in self.envs]
-        # every robot's I0 before any encoding
-        self.coder.set_reference(
-            self._images([f.result().observation for f in futures], "reference")
-        )
-        timesteps, encodings = self._gather(futures)
-        obs = [ts.observation for ts in timesteps]
         lateral = list(self.envs[0].task.lateral_positions)
-        B, r, t_h = self.robots, len(lateral), self.trial_length
-        pans, targets, start_pans = np.zeros((B, r)), np.zeros((B, r)), np.zeros((B, r))
-        best_pans, best_rewards = np.zeros((B, r)), np.full((B, r), -np.inf)
-
-        prev_state = prev_action = prev_rewards = prev_increments = None
-        reference_state = None
-        valid = torch.ones(B, dtype=torch.bool, device=self.device)  # every robot learns every step
-        reward_sum, error_sums, n_enc = 0.0, {}, 0
-        stat_sums: dict[str, float] = {}
-        n_updates = steps = 0
-        learning: Future | None = None  # a dictionary step running on the coder's helper thread
-
-        def finish_dictionary_step() -> None:
-            """This iteration's dictionary step done: waited for, or taken now on this thread."""
-            nonlocal learning
-            if learning is not None:
-                learning.result()
-                learning = None
-            elif learn_dictionaries:
-                self.coder.learn_from(encodings)
-
-        try:
+        tally = _Tally(self.robots, lateral, self.trial_length)
+        valid = torch.ones(self.robots, dtype=torch.bool, device=self.device)  # every robot learns
+        reference_theta = previous = None
+        with Lockstep(self.envs, self.coder) as world:
+            obs, out, last = world.reset()  # every robot's stimulus: I0 cached, I(0) encoded
             while True:
-                iteration = int(obs[0]["iteration"])
-                if self.uses_reference_states and iteration == 0:
-                    # once per trial, with the dictionaries this step's frames were encoded with
-                    reference_state = self.reference_states(self._images(obs, "reference"))
-                if learn_dictionaries and self.EARLY_DICTIONARY_STEP:
-                    # this iteration's dictionary step, on the coder's helper thread while the policy
-                    # learns and acts (the world and the helper would otherwise wait) and the world
-                    # renders; waited for before anything reads the dictionaries again
-                    learning = self.coder.learn_from_async(encodings)
-                out = (
-                    encodings[0].output
-                    if len(encodings) == 1
-                    else CoderOutput.join([encoding.output for encoding in encodings])
-                )
-                reward_sum += float(out.reward.mean())
-                for scale, e in out.errors.items():
-                    error_sums[scale] = error_sums.get(scale, 0.0) + float(e.mean())
-                n_enc += 1
-                p = int(obs[0]["position_index"])
-                current_pans = np.array([float(o["pan"]) for o in obs])
-                if iteration == 0:
-                    start_pans[:, p] = current_pans
+                iteration, p = int(obs[0]["iteration"]), int(obs[0]["position_index"])
+                if iteration == 0:  # a new trial: the step into it crossed a reset, not learnt
+                    previous = None
+                    if self.policy.uses_reference_state:  # with the dictionaries of these frames
+                        references = stack_images(obs, "reference", self.device)
+                        reference_theta = self.coder(references, learn=False).state
+                if learn_dictionaries:
+                    # the paper's last step, started now to run during the policy's turn (the
+                    # policy reads no dictionary) and waited for before the next encoding
+                    world.start_dictionary_step()
+                pans = np.array([float(o["pan"]) for o in obs])
                 rewards = out.reward.cpu().numpy().astype(np.float64)
-                better = rewards > best_rewards[:, p]  # ties keep the earlier pan
-                best_rewards[better, p] = rewards[better]
-                best_pans[better, p] = current_pans[better]
-                # the last step's reward change, within the trial only (none at its first iteration)
-                change = None if iteration == 0 else (rewards, prev_rewards, prev_increments)
-                state = self.policy_state(
-                    out.state, reference_state, current_pans, lateral[p], change
+                tally.encoded(obs, out, pans, rewards)
+                change = (
+                    None if previous is None else (rewards, previous.rewards, previous.increments)
                 )
-                # Robots move in lockstep, so they cross a trial boundary together; the transition into
-                # iteration 0 crosses a reset (new stimulus or new lateral position) and is not learnt.
-                if learn and prev_state is not None and iteration > 0:
-                    stats = self.policy.update(prev_state, prev_action, out.reward, state, valid)
-                    for k, v in stats.items():
-                        stat_sums[k] = stat_sums.get(k, 0.0) + float(v)
-                    n_updates += 1
-                if iteration == t_h - 1:
-                    pans[:, p] = current_pans
-                    targets[:, p] = [float(o["target_pan"]) for o in obs]
-                if timesteps[0].last():
-                    finish_dictionary_step()
+                state = self.policy.state(out.state, reference_theta, pans, lateral[p], change)
+                if learn and previous is not None:
+                    transition = (previous.state, previous.action, out.reward, state, valid)
+                    tally.updated(self.policy.update(*transition))
+                if last:
                     break
                 action = self.policy.act(state, greedy=greedy)
                 increments = self.policy.action_values[action].cpu().numpy()
-                futures = [
-                    world.submit(env.step, float(a)) for env, a in zip(self.envs, increments)
-                ]
-                finish_dictionary_step()  # while the next frames render; they are encoded with it
-                timesteps, encodings = self._gather(futures)
-                obs = [ts.observation for ts in timesteps]
-                prev_state, prev_action, prev_rewards, prev_increments = (
-                    state,
-                    action,
-                    rewards,
-                    increments,
-                )
-                steps += 1
-        finally:
-            if learning is not None:
-                wait([learning])  # never leave a dictionary step running behind an error
-
-        view = None
-        if keep_view:
-            view = np.concatenate([obs[0]["reference"], obs[0]["image"]], axis=1)
-        return Presentation(
-            lateral_positions=lateral,
-            pans=pans,
-            targets=targets,
-            best_pans=best_pans,
-            distances=np.array([float(o["distance"]) for o in obs]),
-            textures=np.array([int(o["texture_index"]) for o in obs]),
-            steps=steps + 1,
-            reward=reward_sum / n_enc,
-            errors={k: v / n_enc for k, v in error_sums.items()},
-            policy_stats={k: v / n_updates for k, v in stat_sums.items()} if n_updates else {},
-            last_view=view,
-            start_pans=start_pans,
-        )
-
-    def _gather(self, futures: list[Future]) -> tuple[list[Any], list[Encoding]]:
-        """The robots' time steps from ``futures`` and the encodings of their frames, chunk by
-        chunk in robot order, each chunk as soon as its frames are there."""
-        timesteps: list[Any] = []
-        encodings: list[Encoding] = []
-        chunk = self.ENCODE_CHUNK if self.robots > 1 else 1
-        for first in range(0, self.robots, chunk):
-            robots = slice(first, min(first + chunk, self.robots))
-            arrived = [future.result() for future in futures[robots]]
-            timesteps += arrived
-            images = self._images([ts.observation for ts in arrived], "image")
-            encodings.append(self.coder.encode(images, robots))
-        return timesteps, encodings
+                previous = _Step(state, action, rewards, increments)
+                obs, out, last = world.step(increments)
+        return tally.presentation(obs, keep_view)
 
     # --- state -----------------------------------------------------------------------------
     def state_dict(self) -> dict:
@@ -355,3 +202,69 @@ class Experiment:
     def close(self) -> None:
         for env in self.envs:
             env.close()
+
+
+class _Step(NamedTuple):
+    """A robot's last step within the trial, for the transition the policy learns from next."""
+
+    state: torch.Tensor  # (B, input_dim) what the policy acted on
+    action: torch.Tensor  # (B,) the action indices
+    rewards: np.ndarray  # (B,) the coder's rewards for the images acted on
+    increments: np.ndarray  # (B,) the pan increments sent (deg)
+
+
+class _Tally:
+    """What one presentation reports (:class:`Presentation`), gathered iteration by iteration."""
+
+    def __init__(self, robots: int, lateral: list[float], trial_length: int) -> None:
+        self.lateral, self.trial_length = lateral, trial_length
+        shape = (robots, len(lateral))
+        self.pans, self.targets, self.start_pans = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        self.best_pans, self.best_rewards = np.zeros(shape), np.full(shape, -np.inf)
+        self.reward_sum, self.error_sums, self.encodings = 0.0, {}, 0
+        self.stat_sums: dict[str, float] = {}
+        self.updates = 0
+
+    def encoded(
+        self, obs: list[dict], out: CoderOutput, pans: np.ndarray, rewards: np.ndarray
+    ) -> None:
+        """The coder's output ``out`` (rewards (B,) in float64) for images seen at ``pans`` (B,)."""
+        iteration, p = int(obs[0]["iteration"]), int(obs[0]["position_index"])
+        self.reward_sum += float(out.reward.mean())
+        for scale, e in out.errors.items():
+            self.error_sums[scale] = self.error_sums.get(scale, 0.0) + float(e.mean())
+        self.encodings += 1
+        if iteration == 0:
+            self.start_pans[:, p] = pans
+        better = rewards > self.best_rewards[:, p]  # ties keep the earlier pan
+        self.best_rewards[better, p] = rewards[better]
+        self.best_pans[better, p] = pans[better]
+        if iteration == self.trial_length - 1:  # q_p, and α* there
+            self.pans[:, p] = pans
+            self.targets[:, p] = [float(o["target_pan"]) for o in obs]
+
+    def updated(self, stats: dict[str, float]) -> None:
+        for k, v in stats.items():
+            self.stat_sums[k] = self.stat_sums.get(k, 0.0) + float(v)
+        self.updates += 1
+
+    def presentation(self, obs: list[dict], keep_view: bool) -> Presentation:
+        """The record, from the tally and the last observations."""
+        view = None
+        if keep_view:
+            view = np.concatenate([obs[0]["reference"], obs[0]["image"]], axis=1)
+        updates = self.updates
+        return Presentation(
+            lateral_positions=self.lateral,
+            pans=self.pans,
+            targets=self.targets,
+            best_pans=self.best_pans,
+            distances=np.array([float(o["distance"]) for o in obs]),
+            textures=np.array([int(o["texture_index"]) for o in obs]),
+            steps=self.encodings,
+            reward=self.reward_sum / self.encodings,
+            errors={k: v / self.encodings for k, v in self.error_sums.items()},
+            policy_stats={k: v / updates for k, v in self.stat_sums.items()} if updates else {},
+            last_view=view,
+            start_pans=self.start_pans,
+        )

@@ -1,5 +1,6 @@
-"""The lockstep of parallax.experiment (issue 7): the worlds step on the GL thread while the coder
-works, robots are encoded chunk by chunk, and none of it changes a number."""
+"""The lockstep (parallax.lockstep) behind Experiment.run_presentation: the worlds step on the GL
+thread while the coder works, robots are encoded chunk by chunk, the dictionary step runs on the
+coder's helper thread, and none of it changes a number."""
 
 from __future__ import annotations
 
@@ -9,55 +10,132 @@ import numpy as np
 import pytest
 import torch
 
+from parallax import lockstep
 from parallax.config import compose
 from parallax.experiment import Experiment
 
 
-def _presentations(
-    overrides: list[str], chunk: int, count: int = 2, early_dictionary_step: bool = True
-):
-    """``count`` presentations of a fresh experiment encoding ``chunk`` robots at a time (its
-    dictionary steps on the helper thread from the policy's turn on, or on the caller's while the
-    world renders), and the state of its coder and policy afterwards."""
-    previous = Experiment.ENCODE_CHUNK, Experiment.EARLY_DICTIONARY_STEP
-    Experiment.ENCODE_CHUNK, Experiment.EARLY_DICTIONARY_STEP = chunk, early_dictionary_step
+def _presentations(overrides: list[str], chunk: int, monkeypatch, count: int = 2):
+    """``count`` presentations of a fresh experiment encoding ``chunk`` robots at a time, the
+    robot slices of its encodings, and the state of its coder and policy afterwards."""
+    monkeypatch.setattr(lockstep, "ENCODE_CHUNK", chunk)
     exp = Experiment(compose(overrides))
+    slices = []
+    encode = exp.coder.encode
+
+    def recording_encode(images, robots=slice(None)):
+        if robots != slice(None):  # not the coder's own call for θ_ref
+            slices.append((robots.start, robots.stop))
+        return encode(images, robots)
+
+    monkeypatch.setattr(exp.coder, "encode", recording_encode)
     try:
         presentations = [exp.run_presentation() for _ in range(count)]
-        return presentations, exp.coder.state_dict(), exp.policy.state_dict()
+        return presentations, slices, exp.coder.state_dict(), exp.policy.state_dict()
     finally:
-        Experiment.ENCODE_CHUNK, Experiment.EARLY_DICTIONARY_STEP = previous
         exp.close()
 
 
+def _plain_presentation(exp: Experiment) -> tuple[np.ndarray, float]:
+    """The paper's loop written plainly on this thread: every world resets, then each iteration
+    one encoding of all the robots' images followed at once by its dictionary step (the coder's
+    forward), the policy's update and action, and the worlds stepped one after the other.
+    Returns the pans q_p (B, r) and the mean reward, as a Presentation reports them."""
+
+    def images(observations, key):
+        return torch.from_numpy(np.stack([o[key] for o in observations]))
+
+    timesteps = [env.reset() for env in exp.envs]
+    obs = [ts.observation for ts in timesteps]
+    exp.coder.set_reference(images(obs, "reference"))
+    lateral = list(exp.envs[0].task.lateral_positions)
+    final_pans = np.zeros((exp.robots, len(lateral)))
+    reward_sum, encodings = 0.0, 0
+    valid = torch.ones(exp.robots, dtype=torch.bool)
+    reference = previous = None
+    while True:
+        iteration, p = int(obs[0]["iteration"]), int(obs[0]["position_index"])
+        if iteration == 0 and exp.policy.uses_reference_state:
+            reference = exp.coder(images(obs, "reference"), learn=False).state
+        out = exp.coder(images(obs, "image"), learn=exp.coder.learn)
+        reward_sum, encodings = reward_sum + float(out.reward.mean()), encodings + 1
+        pans = np.array([float(o["pan"]) for o in obs])
+        rewards = out.reward.numpy().astype(np.float64)
+        change = None if iteration == 0 else (rewards, *previous[2:])
+        state = exp.policy.state(out.state, reference, pans, lateral[p], change)
+        if iteration > 0:
+            exp.policy.update(*previous[:2], out.reward, state, valid)
+        if iteration == exp.trial_length - 1:
+            final_pans[:, p] = pans
+        if timesteps[0].last():
+            return final_pans, reward_sum / encodings
+        action = exp.policy.act(state)
+        increments = exp.policy.action_values[action].numpy()
+        previous = (state, action, rewards, increments)
+        timesteps = [env.step(float(a)) for env, a in zip(exp.envs, increments, strict=True)]
+        obs = [ts.observation for ts in timesteps]
+
+
+def _assert_same_states(first: dict, second: dict) -> None:
+    assert first.keys() == second.keys()
+    for name, value in first.items():
+        if isinstance(value, torch.Tensor):
+            assert torch.equal(value, second[name]), name
+
+
 def _assert_same(first, second) -> None:
-    (presentations_a, coder_a, policy_a), (presentations_b, coder_b, policy_b) = first, second
+    (presentations_a, _, coder_a, policy_a), (presentations_b, _, coder_b, policy_b) = first, second
     for a, b in zip(presentations_a, presentations_b, strict=True):
         for field in ("pans", "best_pans", "targets", "start_pans", "distances", "textures"):
             np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=field)
         assert a.reward == b.reward and a.errors == b.errors and a.policy_stats == b.policy_stats
-    for name in coder_a:
-        assert torch.equal(coder_a[name], coder_b[name]), name
-    for name, value in policy_a.items():
-        if isinstance(value, torch.Tensor):
-            assert torch.equal(value, policy_b[name]), name
+    _assert_same_states(coder_a, coder_b)
+    _assert_same_states(policy_a, policy_b)
 
 
 @pytest.mark.parametrize("extra", [[], ["policy.feature_norm=difference"]])
-def test_robots_encoded_chunk_by_chunk_give_the_numbers_of_one_batch(tiny_overrides, extra) -> None:
-    overrides = tiny_overrides + ["env.robots=3", "env.initial_pan_jitter_deg=1", *extra]
-    one_batch = _presentations(overrides, chunk=3)
-    _assert_same(_presentations(overrides, chunk=1), one_batch)
-    _assert_same(_presentations(overrides, chunk=2), one_batch)  # chunks of 2 and 1
-
-
-@pytest.mark.parametrize(("robots", "extra"), [(1, []), (3, ["policy.feature_norm=difference"])])
-def test_the_dictionary_step_on_the_helper_thread_changes_no_number(
-    tiny_overrides, robots, extra
+def test_robots_encoded_chunk_by_chunk_give_the_numbers_of_one_batch(
+    tiny_overrides, extra, monkeypatch
 ) -> None:
-    overrides = tiny_overrides + [f"env.robots={robots}", "env.initial_pan_jitter_deg=1", *extra]
-    on_the_caller = _presentations(overrides, chunk=2, early_dictionary_step=False)
-    _assert_same(_presentations(overrides, chunk=2, early_dictionary_step=True), on_the_caller)
+    overrides = tiny_overrides + ["env.robots=3", "env.initial_pan_jitter_deg=1", *extra]
+    one_batch = _presentations(overrides, 3, monkeypatch)
+    assert set(one_batch[1]) == {(0, 3)}
+    by_one = _presentations(overrides, 1, monkeypatch)
+    assert set(by_one[1]) == {(0, 1), (1, 2), (2, 3)}
+    _assert_same(by_one, one_batch)
+    by_two = _presentations(overrides, 2, monkeypatch)
+    assert by_two[1][:2] == [(0, 2), (2, 3)]  # chunks of 2 and 1, in robot order
+    _assert_same(by_two, one_batch)
+
+
+@pytest.mark.parametrize(
+    ("robots", "extra"),
+    [
+        (1, []),
+        (3, ["policy.feature_norm=difference", "policy.eye_position_reference_m=0.5"]),
+    ],
+)
+def test_the_lockstep_gives_the_numbers_of_the_plain_loop(
+    tiny_overrides, robots, extra, monkeypatch
+) -> None:
+    # the lockstep: GL thread, chunks of 2, the dictionary step on the helper thread during the
+    # policy's turn; the plain loop: everything on this thread, one call per step
+    monkeypatch.setattr(lockstep, "ENCODE_CHUNK", 2)
+    cfg = compose(tiny_overrides + [f"env.robots={robots}", "env.initial_pan_jitter_deg=1", *extra])
+    scheduled, plain = Experiment(cfg), Experiment(cfg)
+    try:
+        for _ in range(2):
+            presentation = scheduled.run_presentation()
+            pans, reward = _plain_presentation(plain)
+            np.testing.assert_array_equal(presentation.pans, pans)
+            assert presentation.reward == reward
+        assert len(set(pans.ravel().tolist())) > 1  # the robots moved
+        _assert_same_states(scheduled.coder.state_dict(), plain.coder.state_dict())
+        _assert_same_states(scheduled.policy.state_dict(), plain.policy.state_dict())
+        assert scheduled.policy.updates.item() > 0
+    finally:
+        scheduled.close()
+        plain.close()
 
 
 def test_an_error_during_the_step_waits_for_the_dictionary_step(

@@ -41,6 +41,8 @@ class CoderOutput:
     @staticmethod
     def join(outputs: Sequence[CoderOutput]) -> CoderOutput:
         """The outputs of consecutive chunks of robots as one output for all of them."""
+        if len(outputs) == 1:
+            return outputs[0]
         return CoderOutput(
             state=torch.cat([o.state for o in outputs]),
             reward=torch.cat([o.reward for o in outputs]),
@@ -64,7 +66,8 @@ _helper_pid: int | None = None
 
 
 def _scale_helper() -> ThreadPoolExecutor:
-    """The thread that encodes the second scale (one per process, started on first use)."""
+    """The coder's helper thread, one per process, started on first use: it encodes the second
+    scale while the caller encodes the first, and takes the dictionary step of a lockstep."""
     global _helper, _helper_pid
     if _helper is None or _helper_pid != os.getpid():
         _helper, _helper_pid = (
@@ -165,8 +168,6 @@ class MultiScaleCoder(nn.Module):
                 spec, atoms, sparsity, learning_rate, normalisation, generator, pursuit
             )
         self.scales = scales
-        #: Encode the scales on two threads at once (CPU; results are the same).
-        self.parallel_scales = True
         self.atoms = atoms
         self.learn = bool(learn)
         self.normalisation = normalisation
@@ -214,11 +215,9 @@ class MultiScaleCoder(nn.Module):
         """One dictionary step per scale from an encoding, or from the encodings of consecutive
         chunks of robots in robot order (exactly the step of their joint encoding)."""
         chunks = [encodings] if isinstance(encodings, Encoding) else list(encodings)
-        # One scale after the other: in a lockstep this runs (on the helper thread, see
-        # learn_from_async) while the policy acts and the world renders, and with the two scales
-        # on two threads the whole step was slower, probably because it took the core the
-        # renderer needed (session 8, B = 1: 157–166 against 166–176 robot-iterations/s in
-        # alternating runs; B = 16 the same).
+        # One scale after the other, on one thread: in a lockstep this runs (on the helper
+        # thread, see learn_from_async) while the world renders on the other core, which a
+        # second thread for the second scale would take from it.
         for name in self.scales:
             self.coders[name].learn_from([chunk.codes[name] for chunk in chunks])
 
@@ -228,7 +227,7 @@ class MultiScaleCoder(nn.Module):
         The caller must wait for it before it encodes again or reads the dictionaries. In a
         lockstep it runs while the policy learns and acts, when no other thread works: the
         world waits for the actions and the helper for the next frames."""
-        if self.device.type != "cpu" or not self.parallel_scales:
+        if self.device.type != "cpu":
             done: Future = Future()
             self.learn_from(encodings)
             done.set_result(None)
@@ -240,7 +239,7 @@ class MultiScaleCoder(nn.Module):
         thread at the same time (CPU only): the scales share nothing, and their matrix products
         and kernels release the GIL, so a second core encodes the fine scale while this one does
         the coarse (at B = 1 the world waits for the encoding, so that core is free)."""
-        if len(self.scales) == 1 or self.device.type != "cpu" or not self.parallel_scales:
+        if len(self.scales) == 1 or self.device.type != "cpu":
             return {name: work(name) for name in self.scales}
         others = {name: _on_helper(work, name) for name in self.scales[1:]}
         first = {self.scales[0]: work(self.scales[0])}

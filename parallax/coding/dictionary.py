@@ -3,8 +3,8 @@
 * the dictionary φ^j: N = 288 unit-norm atoms of K = 200, randomly initialised (§3.3), stored
   as the ROWS of an (N, K) tensor;
 * one gradient step on the reconstruction error after each encoding, then renormalisation of
-  every atom (§3.3, last paragraph): ΔΦ = η·R·Bᵀ/P in the atoms-as-columns notation of the
-  issue, i.e. Φ ← Φ + (η/P)·Bᵀ·R with atoms as rows, R the (P, K) residuals, B the (P, N) codes;
+  every atom (§3.3, last paragraph): ΔΦ = η·R·Bᵀ/P with atoms as columns, i.e.
+  Φ ← Φ + (η/P)·Bᵀ·R with atoms as rows, R the (P, K) residuals, B the (P, N) codes;
 * pooled activity θ_n = mean_i b_{i,n}² (eqs. 2–3) and reconstruction error
   e = mean_i ‖γ_i − Φᵀb_i‖² / ‖γ_i‖² (eq. 4), where a zero patch (a flat region, see
   ``retina``) contributes 0: its 0/0 is defined as 0.
@@ -14,12 +14,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import numpy as np
 import torch
-import torch.nn.functional as F
 
-from . import native
-from .pursuit import SparseCode, dense_codes
+from . import native, reference
+from .pursuit import SparseCode
 
 #: Atoms are divided by max(‖φ‖, this); a gradient step never comes close to zeroing an atom.
 _MIN_ATOM_NORM = 1e-12
@@ -54,7 +52,7 @@ def codes_times_residuals(
 
     On the CPU a compiled kernel adds up the same terms in the same order, chunk after chunk into
     one product (``kernel``: see :mod:`parallax.coding.native`); elsewhere, or without it,
-    ``embedding_bag`` does, on the concatenated chunks."""
+    :func:`parallax.coding.reference.codes_times_residuals` does, on the concatenated chunks."""
     chunks = [code] if isinstance(code, SparseCode) else list(code)
     compiled = native.kernels_for(kernel, chunks[0].residuals)
     if compiled is not None:
@@ -68,30 +66,12 @@ def codes_times_residuals(
                 product,
             )
         return product
-    atom_indices = torch.cat([chunk.atom_indices for chunk in chunks])
-    coefficients = torch.cat([chunk.coefficients for chunk in chunks])
-    residuals = torch.cat([chunk.residuals for chunk in chunks])
-    picks = atom_indices.reshape(-1)
-    order = _stable_order(picks, n_atoms)
-    counts = torch.bincount(picks, minlength=n_atoms)
-    offsets = torch.zeros_like(counts)
-    offsets[1:] = torch.cumsum(counts, 0)[:-1]
-    patch_of_pick = torch.div(order, atom_indices.shape[1], rounding_mode="floor")
-    return F.embedding_bag(
-        patch_of_pick,
-        residuals,
-        offsets=offsets,
-        mode="sum",
-        per_sample_weights=coefficients.reshape(-1)[order],
+    return reference.codes_times_residuals(
+        torch.cat([chunk.atom_indices for chunk in chunks]),
+        torch.cat([chunk.coefficients for chunk in chunks]),
+        torch.cat([chunk.residuals for chunk in chunks]),
+        n_atoms,
     )
-
-
-def _stable_order(picks: torch.Tensor, n_atoms: int) -> torch.Tensor:
-    """Stable argsort of atom indices; on the CPU numpy's radix sort of int16 keys (~7× faster)."""
-    if picks.device.type == "cpu" and n_atoms <= np.iinfo(np.int16).max:
-        keys = picks.numpy().astype(np.int16)
-        return torch.from_numpy(np.argsort(keys, kind="stable"))
-    return torch.argsort(picks, stable=True)
 
 
 @torch.no_grad()
@@ -138,7 +118,7 @@ def exact_pooled_activity_kernel(
         generator = torch.Generator().manual_seed(patches * 1_000_003 + n_atoms)
         picks = torch.randint(0, n_atoms, (2 * patches, sparsity), generator=generator)
         coefficients = torch.randn(2 * patches, sparsity, generator=generator, dtype=dtype)
-        dense = dense_codes(picks, coefficients, n_atoms).reshape(2, patches, n_atoms)
+        dense = reference.dense_codes(picks, coefficients, n_atoms).reshape(2, patches, n_atoms)
         _EXACT_POOLED_ACTIVITY[key] = torch.equal(
             compiled.pooled_activity(picks, coefficients, patches, n_atoms), pooled_activity(dense)
         )

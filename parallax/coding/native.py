@@ -5,11 +5,12 @@ Five functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch 
 ``pooled_activity`` (θ from the picks, summed in torch's order, without the dense codes; checked
 per shape by :func:`parallax.coding.dictionary.exact_pooled_activity_kernel`) and
 ``codes_times_residuals`` (the dictionary gradient's Bᵀ·R). :func:`load_kernels` builds the C++
-file on first use with ``torch.utils.cpp_extension.load`` (-O3, ~15 s; needs a C++ compiler and the ``ninja``
-package; torch caches the build under ``~/.cache/torch_extensions`` or
+file on first use with ``torch.utils.cpp_extension.load`` (-O3; needs a C++ compiler and the
+``ninja`` package; torch caches the build under ``~/.cache/torch_extensions`` or
 ``$TORCH_EXTENSIONS_DIR``, so later processes only load it), then checks once that all of them
-reproduce the numpy/torch code bit for bit on random data. It returns the module, or ``None`` —
-with one warning line saying why — when the kernels cannot be built or disagree.
+reproduce the numpy/torch code of :mod:`parallax.coding.reference` bit for bit on random data.
+It returns the module, or ``None`` — with one warning line saying why — when the kernels cannot
+be built or disagree.
 
 Which implementation the coder uses on the CPU is chosen by the ``kernel`` argument of
 :func:`parallax.coding.pursuit.matching_pursuit` and
@@ -23,11 +24,14 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
 import torch
+
+from . import reference
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +42,9 @@ SOURCE = Path(__file__).with_name("pursuit_kernel.cpp")
 #: torch's CPU kernels that round ``a + s·b·c`` as one fused multiply-add (checked at load time).
 _FMA_CAPABILITIES = ("AVX2", "AVX512")
 
+# The coder's helper thread may ask for the kernels while this thread builds them: it must wait
+# for the build rather than take the unfinished state for a failed one.
+_load_lock = threading.Lock()
 _loaded = False
 _module: ModuleType | None = None
 _failure: str | None = None
@@ -64,7 +71,7 @@ def _build() -> ModuleType:
     name = f"parallax_pursuit_{capability.lower()}"
     build_directory = _build_directory(cpp_extension, name)
     if not (build_directory / f"{name}.so").exists():
-        log.info("compiling the matching-pursuit kernels into %s (once, ~15 s)", build_directory)
+        log.info("compiling the matching-pursuit kernels into %s (once)", build_directory)
     with _exclusive(build_directory / "parallax.flock"):
         # torch's own lock file outlives a build that was killed, and then every later build
         # waits for it forever; while we hold our lock no other build of ours can be running.
@@ -107,9 +114,6 @@ def _exclusive(path: Path) -> Iterator[None]:
 
 def _self_check(module: ModuleType) -> None:
     """The kernels must give the numpy/torch code's results exactly, in both dtypes."""
-    from .dictionary import codes_times_residuals
-    from .pursuit import _finish, _gram_steps_cpu
-
     generator = torch.Generator().manual_seed(0)
     for dtype in (torch.float32, torch.float64):
         for atoms in (40, 37, 75):  # whole vector lanes only, and a tail after them (short, long)
@@ -118,24 +122,29 @@ def _self_check(module: ModuleType) -> None:
             patches = torch.randn(64, 12, generator=generator, dtype=dtype)
             correlations = patches @ dictionary.T
             gram = dictionary @ dictionary.T
-            expected = _gram_steps_cpu(correlations.clone(), gram, 8)
-            got = module.gram_pursuit(correlations.clone(), gram, 8)
-            code = _finish(patches, dictionary, *expected)
-            codes, residuals = module.codes_and_residuals(patches, dictionary, *expected)
-            product = module.codes_times_residuals(
-                code.atom_indices, code.coefficients, code.residuals, atoms
+            picks, coefficients = reference.gram_steps_cpu(correlations.clone(), gram, 8)
+            codes, residuals = reference.codes_and_residuals(
+                patches, dictionary, picks, coefficients
+            )
+            got_picks, got_coefficients = module.gram_pursuit(correlations.clone(), gram, 8)
+            got_codes, got_residuals = module.codes_and_residuals(
+                patches, dictionary, picks, coefficients
             )
             for name, mine, theirs in (
-                ("picks", got[0], expected[0]),
-                ("coefficients", got[1], expected[1]),
-                ("codes", codes, code.codes),
-                ("residuals", residuals, code.residuals),
+                ("picks", got_picks, picks),
+                ("coefficients", got_coefficients, coefficients),
+                ("codes", got_codes, codes),
+                ("residuals", got_residuals, residuals),
                 (
                     "residuals alone",
-                    module.residuals_only(patches, dictionary, *expected),
-                    code.residuals,
+                    module.residuals_only(patches, dictionary, picks, coefficients),
+                    residuals,
                 ),
-                ("B^T R", product, codes_times_residuals(code, atoms, kernel="torch")),
+                (
+                    "B^T R",
+                    module.codes_times_residuals(picks, coefficients, residuals, atoms),
+                    reference.codes_times_residuals(picks, coefficients, residuals, atoms),
+                ),
             ):
                 if not torch.equal(mine, theirs):
                     raise RuntimeError(
@@ -146,19 +155,23 @@ def _self_check(module: ModuleType) -> None:
 def load_kernels() -> ModuleType | None:
     """The compiled module, built and checked on the first call; None if unavailable."""
     global _loaded, _module, _failure
-    if not _loaded:
-        _loaded = True
-        try:
-            module = _build()
-            _self_check(module)
-            _module = module
-        except Exception as error:  # noqa: BLE001 — any failure means: use the fallback
-            lines = str(error).strip().splitlines()
-            _failure = f"{type(error).__name__}: {lines[0] if lines else ''}"
-            log.warning(
-                "compiled matching-pursuit kernels unavailable (%s); using the numpy/torch code",
-                _failure,
-            )
+    if _loaded:
+        return _module
+    with _load_lock:
+        if not _loaded:
+            try:
+                module = _build()
+                _self_check(module)
+                _module = module
+            except Exception as error:  # noqa: BLE001 — any failure means: use the fallback
+                lines = str(error).strip().splitlines()
+                _failure = f"{type(error).__name__}: {lines[0] if lines else ''}"
+                log.warning(
+                    "compiled matching-pursuit kernels unavailable (%s); using the numpy/torch "
+                    "code",
+                    _failure,
+                )
+            _loaded = True
     return _module
 
 

@@ -15,10 +15,10 @@ and for the benchmark that compares the two. Residuals are rebuilt from the k pi
 On the CPU the k Gram-form steps, the dense codes and the residuals run in compiled kernels
 (``pursuit_kernel.cpp``, built on first use by :mod:`parallax.coding.native`) that pursue patch
 by patch with the patch's correlations in L1 cache; their results are bit-identical to those of
-the numpy/torch loop :func:`_gram_steps_cpu` and :func:`_finish`, which remain the fallback when
-no compiler is available. The choice is ``kernel=`` of :func:`matching_pursuit` or the
-environment variable ``PARALLAX_PURSUIT_KERNEL``: ``auto`` (default), ``cpp`` or ``torch``.
-Other devices use the torch loop :func:`_gram_steps`.
+the numpy/torch code of :mod:`parallax.coding.reference`, which remains the fallback when no
+compiler is available and runs on other devices. The choice is ``kernel=`` of
+:func:`matching_pursuit` or the environment variable ``PARALLAX_PURSUIT_KERNEL``: ``auto``
+(default), ``cpp`` or ``torch``.
 
 Dictionaries are (N, K) with atoms as unit-norm rows; patches are (M, K) rows. Any float dtype
 and device work; on the CPU the per-step bookkeeping runs in numpy on zero-copy views.
@@ -30,9 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
-from . import native
+from . import native, reference
 
 
 @dataclass
@@ -52,14 +51,6 @@ def gram_matrix(dictionary: torch.Tensor) -> torch.Tensor:
     return dictionary @ dictionary.T
 
 
-def dense_codes(
-    atom_indices: torch.Tensor, coefficients: torch.Tensor, n_atoms: int
-) -> torch.Tensor:
-    """(M, N) coefficients b_{i,n} from the per-step picks; repeated picks accumulate."""
-    codes = coefficients.new_zeros(coefficients.shape[0], n_atoms)
-    return codes.scatter_add_(1, atom_indices, coefficients)
-
-
 def _check_inputs(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: int) -> None:
     if patches.dim() != 2 or dictionary.dim() != 2 or patches.shape[1] != dictionary.shape[1]:
         raise ValueError(
@@ -75,23 +66,15 @@ def _check_inputs(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: int
         raise ValueError(f"sparsity must be a positive integer, got {sparsity!r}")
 
 
-def reconstruct(
-    dictionary: torch.Tensor, atom_indices: torch.Tensor, coefficients: torch.Tensor
-) -> torch.Tensor:
-    """Σ_s c_s·φ_{k_s} per patch, (M, K), from the picks alone: M·k·K work instead of M·N·K."""
-    return F.embedding_bag(atom_indices, dictionary, per_sample_weights=coefficients, mode="sum")
-
-
-def _finish(
+def _code(
     patches: torch.Tensor,
     dictionary: torch.Tensor,
     atom_indices: torch.Tensor,
     coefficients: torch.Tensor,
-    residuals: torch.Tensor | None = None,
 ) -> SparseCode:
-    codes = dense_codes(atom_indices, coefficients, dictionary.shape[0])
-    if residuals is None:
-        residuals = patches - reconstruct(dictionary, atom_indices, coefficients)
+    codes, residuals = reference.codes_and_residuals(
+        patches, dictionary, atom_indices, coefficients
+    )
     return SparseCode(atom_indices, coefficients, codes, residuals)
 
 
@@ -132,9 +115,10 @@ def matching_pursuit(
             patches.contiguous(), dictionary.contiguous(), atom_indices, coefficients
         )
         return SparseCode(atom_indices, coefficients, codes, residuals)
-    steps = _gram_steps_cpu if correlations.device.type == "cpu" else _gram_steps
+    cpu = correlations.device.type == "cpu"
+    steps = reference.gram_steps_cpu if cpu else reference.gram_steps
     atom_indices, coefficients = steps(correlations, gram, sparsity)
-    return _finish(patches, dictionary, atom_indices, coefficients)
+    return _code(patches, dictionary, atom_indices, coefficients)
 
 
 def _abs_argmax(values: torch.Tensor) -> torch.Tensor:
@@ -142,48 +126,6 @@ def _abs_argmax(values: torch.Tensor) -> torch.Tensor:
     if values.device.type == "cpu":
         return torch.from_numpy(np.abs(values.numpy()).argmax(axis=1))
     return values.abs().argmax(dim=1)
-
-
-def _gram_steps(
-    correlations: torch.Tensor, gram: torch.Tensor, sparsity: int
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """The pursuit steps in torch, for any device: (M, sparsity) picks and coefficients."""
-    # One M×N buffer reused by every step: fresh allocations cost as much as the arithmetic here.
-    gram_rows = torch.empty_like(correlations)
-    picks, coefficients = [], []
-    for _ in range(sparsity):
-        picked = correlations.abs().argmax(dim=1)
-        coefficient = correlations.gather(1, picked.unsqueeze(1))
-        picks.append(picked)
-        coefficients.append(coefficient.squeeze(1))
-        # The residual r − c·φ_k has correlations C − c·G[k]: no pass over K needed.
-        torch.index_select(gram, 0, picked, out=gram_rows)
-        correlations.addcmul_(coefficient, gram_rows, value=-1.0)
-    return torch.stack(picks, dim=1), torch.stack(coefficients, dim=1)
-
-
-def _gram_steps_cpu(
-    correlations: torch.Tensor, gram: torch.Tensor, sparsity: int
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """The same steps on the CPU, with the row-wise |argmax| and the pick bookkeeping in numpy on
-    zero-copy views: torch's CPU row argmax is ~5× slower than numpy's at 529×288, and each small
-    torch call costs several µs of dispatch, which dominates when the arithmetic is ~20 µs."""
-    values = correlations.numpy()
-    magnitudes = np.empty_like(values)
-    gram_rows = torch.empty_like(correlations)
-    every_row = np.arange(values.shape[0])
-    picks, coefficients = [], []
-    for _ in range(sparsity):
-        np.abs(values, out=magnitudes)
-        picked = magnitudes.argmax(axis=1)  # first maximum on ties, like torch
-        coefficient = values[every_row, picked]
-        picks.append(picked)
-        coefficients.append(coefficient)
-        torch.index_select(gram, 0, torch.from_numpy(picked), out=gram_rows)
-        correlations.addcmul_(torch.from_numpy(coefficient).unsqueeze(1), gram_rows, value=-1.0)
-    return torch.from_numpy(np.stack(picks, axis=1)), torch.from_numpy(
-        np.stack(coefficients, axis=1)
-    )
 
 
 @torch.no_grad()
@@ -203,4 +145,5 @@ def matching_pursuit_recompute(
         atom_indices[:, step] = picked
         coefficients[:, step : step + 1] = coefficient
         residuals -= coefficient * dictionary.index_select(0, picked)
-    return _finish(patches, dictionary, atom_indices, coefficients, residuals)
+    codes = reference.dense_codes(atom_indices, coefficients, dictionary.shape[0])
+    return SparseCode(atom_indices, coefficients, codes, residuals)

@@ -2,7 +2,8 @@
 // and the two sparse products around it (the residuals and the dictionary gradient Bᵀ·R).
 //
 // parallax/coding/native.py builds this file on first use (torch.utils.cpp_extension.load);
-// parallax/coding/pursuit.py and dictionary.py call it in place of their numpy/torch code.
+// parallax/coding/pursuit.py and dictionary.py call it in place of the numpy/torch code of
+// reference.py.
 //
 // gram_pursuit: patch by patch, a row of correlations c = Φ·γ (N values, a few KiB, in L1 cache
 // for all the steps):
@@ -19,11 +20,12 @@
 // those of the torch path.
 //
 // codes_and_residuals and codes_times_residuals replace scatter_add_ and torch's embedding_bag
-// (pursuit.dense_codes, pursuit.reconstruct, dictionary.codes_times_residuals) and add up in the
-// same order with the same rounding, so they too are bit-identical. native.py checks all three
-// against the torch code once before the coder uses them.
+// (reference.py's codes_and_residuals and codes_times_residuals) and add up in the same order
+// with the same rounding, so they too are bit-identical. native.py checks all three against
+// reference.py once before the coder uses them.
 
-// The few ATen headers it needs rather than <torch/extension.h>: the build takes ~15 s, not ~40.
+// The few ATen headers it needs rather than <torch/extension.h>, which would make every build
+// compile most of torch's headers.
 #include <ATen/Dispatch.h>
 #include <ATen/Parallel.h>
 #include <ATen/core/Tensor.h>

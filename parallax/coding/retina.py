@@ -6,8 +6,8 @@ grayscale → centre window (250 px coarse, 150 px fine) → Gaussian pyramid (�
 reference patch of I0 stacked over the patch of I(t), K = 2·10·10 = 200 elements.
 
 Tensors in, tensors out, on the dictionaries' device. On the CPU the grey conversion and the
-pyramid call OpenCV (``cvtColor``, ``pyrDown``: tens of µs where the torch convolution takes
-half a millisecond); elsewhere a torch copy of ``pyrDown`` (5-tap binomial kernel,
+pyramid call OpenCV (``cvtColor``, ``pyrDown``: on images this small a torch convolution costs
+many times more); elsewhere a torch copy of ``pyrDown`` (5-tap binomial kernel,
 BORDER_REFLECT_101, output size ⌈n/2⌉) runs; ``tests/coding/test_retina.py`` checks that both
 agree with OpenCV.
 
@@ -153,7 +153,7 @@ def as_gray_batch(images: Any, device: torch.device | None = None) -> torch.Tens
 
 
 def rgb_to_gray_opencv(rgb: torch.Tensor) -> torch.Tensor:
-    """(B,H,W,3) CPU tensor → (B,H,W) float32 by cv2.cvtColor, unrounded (≈3× faster than torch)."""
+    """(B,H,W,3) CPU tensor → (B,H,W) float32 by cv2.cvtColor, unrounded (quicker than torch)."""
     pixels = rgb.contiguous().numpy()
     gray = np.empty(pixels.shape[:3], dtype=np.float32)
     for image, out in zip(pixels, gray):  # straight into the batch: no np.stack copy
@@ -189,7 +189,8 @@ def pyramid_down(gray: torch.Tensor, levels: int) -> torch.Tensor:
 
 
 def pyramid_down_torch(gray: torch.Tensor, levels: int) -> torch.Tensor:
-    """cv2.pyrDown in torch: blur with the 5-tap binomial (reflect-101 borders), keep even pixels."""
+    """cv2.pyrDown in torch: blur with the 5-tap binomial (reflect-101 borders), keep the even
+    pixels."""
     taps = torch.tensor(_BINOMIAL_5, dtype=gray.dtype, device=gray.device) / 16.0
     kernel = (taps[:, None] * taps[None, :])[None, None]
     image = gray[:, None]

@@ -1,8 +1,9 @@
 """Pursuit policy (paper §3.4, eqs. 5–8): natural actor-critic over pan increments.
 
-``NaturalActorCritic`` is the learner the trainer instantiates from ``conf/policy/nac.yaml``;
-``features`` holds the optional state normalisations; ``synthetic_pursuit`` is a small stand-in
-task used by the tests and for choosing step sizes; ``benchmark`` times act + update.
+``NaturalActorCritic`` is the learner the trainer instantiates from ``conf/policy/nac.yaml``; it
+builds the state it acts on from what the robots observe (``NaturalActorCritic.state``: θ, and
+beyond the paper θ_ref, the pans and the reward change). ``features`` holds the optional
+normalisations of θ.
 """
 
 from parallax.policy.features import FEATURE_NORMS, FeatureNormalizer

@@ -13,13 +13,13 @@ of squared norm ≈ 0.02 whose direction is dominated by that common part. Three
   (E‖φ‖² = state_dim) would make the critic's LMS step diverge;
 * ``centred_unit`` / ``zscore_unit`` — minus the running mean (and z-scored), then each state
   scaled to unit norm;
-* ``difference``    — beyond the paper: the experiment hands over θ(t) − θ_ref, where θ_ref is
-  the pooled activity of the pair (I0, I0), i.e. of the same stimulus at zero disparity
-  (``Experiment.reference_states``). Each row is divided by max(‖row‖, running mean of ‖row‖):
-  ‖φ‖ ≤ 1 keeps the α_v = 1 critic step stable, and small differences stay small, so at the
-  target (I(t) ≈ I0, φ ≈ 0) the logits vanish for every texture and π has no preferred step.
-  The stimulus-specific part of θ, which otherwise shifts the policy's fixed point by a
-  texture-dependent offset, cancels in the difference.
+* ``difference``    — beyond the paper: the states are θ(t) − θ_ref, where θ_ref is the pooled
+  activity of the pair (I0, I0), i.e. of the same stimulus at zero disparity
+  (``NaturalActorCritic.state`` takes the difference). Each row is divided by
+  max(‖row‖, running mean of ‖row‖): ‖φ‖ ≤ 1 keeps the α_v = 1 critic step stable, and small
+  differences stay small, so at the target (I(t) ≈ I0, φ ≈ 0) the logits vanish for every
+  texture and π has no preferred step. The stimulus-specific part of θ, which otherwise shifts
+  the policy's fixed point by a texture-dependent offset, cancels in the difference.
 
 The running statistics (count, mean, sum of squared deviations, in float64) are buffers, so
 they travel with the state dict; they are updated only when asked (the policy does it for the
@@ -71,7 +71,8 @@ class FeatureNormalizer(nn.Module):
         self.register_buffer("mean", torch.zeros(state_dim, dtype=torch.float64))
         self.register_buffer("sum_sq_dev", torch.zeros(state_dim, dtype=torch.float64))
         if mode == REFERENCE_MODE:
-            # running mean of ‖θ(t) − θ_ref‖; only this mode has it, so older checkpoints still load
+            # running mean of ‖θ(t) − θ_ref‖; registered in this mode only, so that the other
+            # modes' state dicts hold only what they use
             self.register_buffer("norm_mean", torch.zeros((), dtype=torch.float64))
 
     def observe(self, states: torch.Tensor) -> None:

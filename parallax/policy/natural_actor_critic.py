@@ -30,7 +30,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from parallax.policy.features import FeatureNormalizer
+from parallax.policy.features import REFERENCE_MODE, FeatureNormalizer
 
 #: The paper's pan increments in degrees (§3.4).
 PAPER_ACTIONS_DEG = (-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2)
@@ -108,7 +108,8 @@ class NaturalActorCritic(nn.Module):
         self.eye_position_reference_m = _check_non_negative(
             "eye_position_reference_m", eye_position_reference_m
         )
-        # Beyond the paper: one proprioceptive entry after the normalised θ (see eye_position_feature).
+        # Beyond the paper: one proprioceptive entry after the normalised θ (see
+        # eye_position_feature).
         self.eye_position_dims = 1 if self.eye_position_reference_m > 0 else 0
         # Beyond the paper: one more entry, the last step's change of reward in its direction
         # (see reward_change_feature).
@@ -162,6 +163,12 @@ class NaturalActorCritic(nn.Module):
     def feature_norm(self) -> str:
         return self.normalizer.mode
 
+    @property
+    def uses_reference_state(self) -> bool:
+        """Whether the policy acts on θ(t) − θ_ref (``feature_norm=difference``, beyond the
+        paper): :meth:`state` then takes θ_ref, the coder's θ for the pair (I0, I0)."""
+        return self.feature_norm == REFERENCE_MODE
+
     # ------------------------------------------------------------------ checks
 
     def _check_states(self, name: str, states: torch.Tensor) -> torch.Tensor:
@@ -183,6 +190,43 @@ class NaturalActorCritic(nn.Module):
             shape = tuple(values.shape) if isinstance(values, torch.Tensor) else type(values)
             raise ValueError(f"{name} must be a ({batch},) tensor, got {shape}")
         return values.to(self.actor.device)
+
+    # ------------------------------------------------------------------ state
+
+    def state(
+        self,
+        theta: torch.Tensor,
+        reference_theta: torch.Tensor | None,
+        pans_deg: np.ndarray,
+        lateral_m: float,
+        reward_change: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> torch.Tensor:
+        """What the policy acts on, (B, input_dim), from what the robots observe: the coder's
+        θ (B, state_dim) — minus θ_ref (B, state_dim) when :attr:`uses_reference_state`, else
+        ``reference_theta`` must be None — then the eye-position entry for the pans (B,) at the
+        robots' shared lateral position when ``eye_position_reference_m`` > 0, then the
+        reward-change entry when ``reward_change_gain`` > 0 (all three beyond the paper; see
+        :meth:`eye_position_feature` and :meth:`reward_change_feature`). ``reward_change`` is
+        (rewards, previous rewards, previous pan increments), each (B,); None where there is no
+        previous step in the trial (the entry is then 0)."""
+        if (reference_theta is not None) != self.uses_reference_state:
+            raise ValueError(
+                f"feature_norm={self.feature_norm!r} "
+                + ("needs θ_ref" if self.uses_reference_state else "takes no θ_ref")
+            )
+        state = theta if reference_theta is None else theta - reference_theta
+        extra = []
+        if self.eye_position_dims:
+            pans = torch.as_tensor(np.asarray(pans_deg, dtype=np.float64))
+            extra.append(self.eye_position_feature(pans, lateral_m))
+        if self.reward_change_dims:
+            if reward_change is None:
+                extra.append(
+                    torch.zeros(state.shape[0], 1, dtype=self.actor.dtype, device=self.actor.device)
+                )
+            else:
+                extra.append(self.reward_change_feature(*reward_change))
+        return torch.cat([state, *[e.to(state.dtype) for e in extra]], dim=1) if extra else state
 
     # ------------------------------------------------------------------ policy
 
@@ -207,7 +251,8 @@ class NaturalActorCritic(nn.Module):
         position, so one linear weight can tell "turned further than any plausible target"
         wherever the robot stands. A linear policy on pooled activities alone cannot: once the
         image pair no longer overlaps, a pan past the target and one short of it look alike
-        (``python -m parallax.tools.analysis.landscape … --span 4``). ν is 0 at l = 0, where no pan is implied.
+        (``python -m parallax.tools.analysis.landscape … --span 4``). ν is 0 at l = 0, where no
+        pan is implied.
         """
         pan = torch.as_tensor(pan_deg, dtype=self.actor.dtype, device=self.actor.device).reshape(
             -1, 1
@@ -230,16 +275,17 @@ class NaturalActorCritic(nn.Module):
 
         Beyond the paper. g = clip(gain · (r_t − r_{t−1}) / |r_{t−1}| · sign(a_{t−1}), −1, 1): > 0
         when turning left (a > 0) helped or turning right hurt, < 0 the other way, 0 after a
-        zero step. The reward −(e_C + e_F) peaks at α* on both sides (``parallax.tools.analysis.landscape``),
-        so g says on which side of the peak the eye is, which the pooled activities do not once
-        the image pair no longer overlaps: past the target the eye kept turning (runaways,
-        docs/results/beyond_the_paper.md). One weight per action can then say "go back where the
-        reward fell". It is a memory of one step (an efference copy of the last movement and
-        the change it made), not knowledge of the distance. Relative to |r_{t−1}| so one gain
-        serves untrained and trained coders alike, whose rewards differ tenfold. The caller
-        passes previous_increments = 0 where there is no previous step in the trial."""
-        # numpy on the host: a handful of (B,) values per step, where torch's per-call overhead
-        # made the whole step ~4 % slower at B = 1
+        zero step. The reward −(e_C + e_F) peaks at α* on both sides
+        (``parallax.tools.analysis.landscape``), so g says on which side of the peak the eye is,
+        which the pooled activities do not once the image pair no longer overlaps: past the
+        target the eye kept turning (runaways, docs/results/beyond_the_paper.md). One weight per
+        action can then say "go back where the reward fell". It is a memory of one step (an
+        efference copy of the last movement and the change it made), not knowledge of the
+        distance. Relative to |r_{t−1}| so one gain serves untrained and trained coders alike,
+        whose rewards differ tenfold. Where there is no previous step in the trial,
+        :meth:`state` puts 0 instead."""
+        # numpy on the host: a handful of (B,) values per step, too few to be worth torch's
+        # per-call overhead
         rewards = np.asarray(rewards, dtype=np.float64).reshape(-1)
         previous = np.asarray(previous_rewards, dtype=np.float64).reshape(-1)
         direction = np.sign(np.asarray(previous_increments, dtype=np.float64).reshape(-1))

@@ -10,6 +10,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 
+import parallax.config  # noqa: F401 — registers the schema that the conf/coder files extend
 from parallax.coding import CoderOutput, MultiScaleCoder, save_png
 from parallax.coding.retina import as_gray_batch
 

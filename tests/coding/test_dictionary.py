@@ -67,10 +67,10 @@ def test_reconstruction_error_is_relative_and_zero_patches_count_zero() -> None:
 
 
 def test_cpu_radix_grouping_matches_the_torch_sort_used_elsewhere() -> None:
-    from parallax.coding.dictionary import _stable_order
+    from parallax.coding.reference import stable_order
 
     picks = torch.randint(0, 288, (5000,), generator=_generator(5))
-    fast = _stable_order(picks, 288)  # numpy int16 radix sort on the CPU
-    general = _stable_order(picks, 40_000)  # torch's stable argsort (any device)
+    fast = stable_order(picks, 288)  # numpy int16 radix sort on the CPU
+    general = stable_order(picks, 40_000)  # torch's stable argsort (any device)
     assert torch.equal(fast, general)
     assert torch.equal(picks[fast], torch.sort(picks, stable=True).values)

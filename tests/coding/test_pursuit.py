@@ -8,12 +8,8 @@ import torch
 from sklearn.linear_model import orthogonal_mp
 
 from parallax.coding.dictionary import random_dictionary
-from parallax.coding.pursuit import (
-    dense_codes,
-    gram_matrix,
-    matching_pursuit,
-    matching_pursuit_recompute,
-)
+from parallax.coding.pursuit import gram_matrix, matching_pursuit, matching_pursuit_recompute
+from parallax.coding.reference import dense_codes, gram_steps, gram_steps_cpu
 from parallax.coding.retina import stack_pair
 
 K, N, SPARSITY = 200, 288, 10
@@ -134,13 +130,11 @@ def test_mismatched_shapes_and_bad_sparsity_are_refused() -> None:
 
 
 def test_cpu_and_device_agnostic_steps_agree() -> None:
-    from parallax.coding.pursuit import _gram_steps, _gram_steps_cpu, gram_matrix
-
     dictionary = _unit_rows(N, K, seed=12)
     correlations = _unit_rows(50, K, seed=13) @ dictionary.T
     gram = gram_matrix(dictionary)
-    picks_cpu, coefficients_cpu = _gram_steps_cpu(correlations.clone(), gram, SPARSITY)
-    picks_any, coefficients_any = _gram_steps(correlations.clone(), gram, SPARSITY)
+    picks_cpu, coefficients_cpu = gram_steps_cpu(correlations.clone(), gram, SPARSITY)
+    picks_any, coefficients_any = gram_steps(correlations.clone(), gram, SPARSITY)
     assert torch.equal(picks_cpu, picks_any)
     torch.testing.assert_close(coefficients_cpu, coefficients_any)
 
@@ -163,7 +157,7 @@ def _compiler_missing() -> str | None:
 
 @pytest.fixture(scope="module")
 def compiled():
-    """The compiled kernels; the first build of a fresh cache takes ~15 s, once."""
+    """The compiled kernels (built once per cache, then loaded)."""
     from parallax.coding import native
 
     missing = _compiler_missing()
@@ -177,15 +171,14 @@ def compiled():
 
 
 def _both_steps(compiled, correlations: torch.Tensor, gram: torch.Tensor, sparsity: int):
-    from parallax.coding.pursuit import _gram_steps_cpu
-
-    expected = _gram_steps_cpu(correlations.clone(), gram, sparsity)
+    expected = gram_steps_cpu(correlations.clone(), gram, sparsity)
     got = compiled.gram_pursuit(correlations.clone(), gram, sparsity)
     return expected, got
 
 
 def _realistic_patches(dtype: torch.dtype) -> torch.Tensor:
-    """Normalised [I0 ; I(t)] patch pairs of a photograph at the coarse scale, as the coder makes."""
+    """Normalised [I0 ; I(t)] patch pairs of a photograph at the coarse scale, as the coder
+    makes them."""
     import skimage.data
 
     from parallax.coding.retina import ScaleSpec, as_gray_batch, prepare_reference, scale_patches

@@ -6,6 +6,7 @@ import inspect
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from hydra.utils import instantiate
@@ -445,3 +446,31 @@ def test_reward_change_feature_is_the_signed_relative_change_and_bypasses_the_no
         torch.ones(3, dtype=torch.bool),
     )
     assert not torch.equal(policy.actor[:, -1], before)
+
+
+def test_the_policy_builds_its_state_from_what_the_robots_observe() -> None:
+    # θ (minus θ_ref with feature_norm=difference), then ν for the pans, then g for the rewards
+    policy = _policy(
+        feature_norm="difference", eye_position_reference_m=0.5, reward_change_gain=10.0
+    )
+    assert policy.uses_reference_state and not _policy().uses_reference_state
+    theta, reference = _states(3, seed=64), _states(3, seed=65)
+    pans = np.array([1.0, -0.5, 2.0])
+    rewards, previous, increments = np.array([-0.9, -1.1, -1.0]), -np.ones(3), np.full(3, 0.1)
+    state = policy.state(theta, reference, pans, 0.05, (rewards, previous, increments))
+    assert state.shape == (3, policy.input_dim)
+    torch.testing.assert_close(state[:, :SMALL_DIM], theta - reference, rtol=0, atol=0)
+    torch.testing.assert_close(
+        state[:, SMALL_DIM], policy.eye_position_feature(torch.tensor(pans), 0.05)[:, 0]
+    )
+    torch.testing.assert_close(
+        state[:, -1], policy.reward_change_feature(rewards, previous, increments)[:, 0]
+    )
+    # no previous step in the trial: the reward-change entry is 0
+    assert torch.equal(policy.state(theta, reference, pans, 0.05)[:, -1], torch.zeros(3))
+    with pytest.raises(ValueError, match="needs θ_ref"):
+        policy.state(theta, None, pans, 0.05)
+    with pytest.raises(ValueError, match="takes no θ_ref"):
+        _policy().state(theta, reference, pans, 0.05)
+    # the paper's state: θ as the coder gives it
+    assert _policy().state(theta, None, pans, 0.05) is theta

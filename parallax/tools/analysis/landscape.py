@@ -58,7 +58,9 @@ def sweep(
                 reference_image = torch.from_numpy(reference[None].copy())
                 exp.coder.set_reference(reference_image)
                 baseline = (
-                    exp.reference_states(reference_image) if exp.uses_reference_states else None
+                    exp.coder(reference_image, learn=False).state
+                    if exp.policy.uses_reference_state
+                    else None
                 )
                 row_r, row_e, row_a = [], [], []
                 for offset, frame in zip(offsets, views):
@@ -67,7 +69,7 @@ def sweep(
                     # with policy.reward_change_gain: as if the eye had come from the previous
                     # offset by a leftward turn (+), as it does from pan 0 towards α* and beyond
                     change = (reward_here, np.array([row_r[-1]]), np.ones(1)) if row_r else None
-                    state = exp.policy_state(
+                    state = exp.policy.state(
                         out.state, baseline, np.array([target + offset]), lateral, change
                     )
                     row_r.append(float(out.reward[0]))
