@@ -22,8 +22,8 @@ import torch
 
 from parallax.tools.bench.timing import interleaved_medians_ms
 
-from . import native
-from .coder import MultiScaleCoder
+from parallax.coding import native
+from parallax.coding.coder import MultiScaleCoder
 
 SCALE_SPECS = {
     "coarse": {"window": 250, "subsample": 8, "patch": 10, "stride": 1},
