@@ -20,10 +20,9 @@ import cv2
 import numpy as np
 import torch
 
-from parallax.tools.bench.timing import interleaved_medians_ms
-
 from parallax.coding import native
 from parallax.coding.coder import MultiScaleCoder
+from parallax.tools.bench.timing import interleaved_medians_ms
 
 SCALE_SPECS = {
     "coarse": {"window": 250, "subsample": 8, "patch": 10, "stride": 1},
