@@ -1,17 +1,24 @@
 """`parallax-train`: the Hydra application that runs the paper's whole loop (Fig. 1).
 
-    parallax-train                                   # default experiment (conf/config.yaml)
+    parallax-train                                   # our recipe (parallax/config/schema.py)
+    parallax-train experiment=paper_multi_5_20       # the paper's algorithm as written
     parallax-train curriculum=multi_5_10 distance.y=2 coder.scales=[coarse]
     parallax-train -m seed=0,1,2 hydra/launcher=joblib
 
-A bad configuration fails before Hydra creates a run directory: the overrides are composed and
-validated first (`parallax.config.validate`), and only then does Hydra take over.
+A bad command line fails before Hydra creates a run directory, with one line naming the key and
+the value and exit status 2: the overrides are composed (Hydra checks the types against the
+schema) and validated (:func:`parallax.config.validate`) first, and only then does Hydra take
+over. In a sweep (-m) every job's overrides are composed first, so that a typo stops the sweep
+before any job runs; each job then validates its own configuration and a bad job fails alone,
+before the trainer writes anything into its directory.
 """
 
 from __future__ import annotations
 
 import logging
+import re
 import sys
+from collections.abc import Sequence
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
@@ -31,8 +38,12 @@ from parallax.config import (
     register_resolvers,
     validate,
 )
+from parallax.config.plumbing import closest_key
+from parallax.config.schema import SCHEMA_NODE
 
-_SWEEP_MARKERS = (",", "range(", "choice(", "glob(", "interval(")
+#: Hydra flags after which no run starts, or whose config source `compose` cannot see: Hydra
+#: handles these command lines on its own.
+_HYDRA_ONLY = ("help", "hydra_help", "cfg", "info", "shell_completion", "config_path")
 
 
 def _fail(message: str) -> None:
@@ -40,31 +51,100 @@ def _fail(message: str) -> None:
     sys.exit(2)
 
 
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    return text[0] if text else type(exc).__name__
+def _first_line(exc: BaseException | None) -> str:
+    lines = [line.strip() for line in str(exc).strip().splitlines() if line.strip()]
+    return lines[0] if lines else type(exc).__name__
 
 
-def prevalidate(argv: list[str]) -> None:
-    """Compose and validate a single run's overrides; exit with one line on a bad config.
+def explain(exc: BaseException, overrides: Sequence[str]) -> str:
+    """One line for a Hydra composition error: the override it is about and what is wrong."""
+    text, first = str(exc), _first_line(exc)
+    merging = re.match(r"Error merging override (.+)", first)
+    if merging:
+        return f"{merging.group(1)}: {_first_line(exc.__cause__)}"
+    unknown = re.match(r"Could not override '(.+)'\.", first)
+    if unknown:
+        key = unknown.group(1)
+        given = next((o for o in overrides if o.split("=", 1)[0] == key), key)
+        close = closest_key(key)
+        return f"{given}: no such setting" + (f"; did you mean {close}?" if close else "")
+    missing = re.match(r"In '.+': Could not find '(.+)/([^/]+)'", first)
+    if missing:
+        group, option = missing.groups()
+        listed = text.split("Available options in", 1)[-1].split("Config search path", 1)[0]
+        options = [o.strip() for o in listed.splitlines()[1:] if o.strip()]
+        options = [o for o in options if o != SCHEMA_NODE] or ["(none)"]
+        return f"{group}={option}: no such choice; {group} has {', '.join(options)}"
+    if first.startswith("Ambiguous value for argument"):
+        given = first[len("Ambiguous value for argument ") :].strip("'")
+        return f"{given}: add -m to sweep over its values, or write a list as key=[a,b]"
+    return first
 
-    Sweeps (-m) and Hydra's own flags are left to Hydra; each job of a sweep validates itself.
-    """
-    if any(a.startswith("-") for a in argv):
-        return
-    if any(
-        marker in a.split("=", 1)[-1]
-        for a in argv
-        for marker in _SWEEP_MARKERS
-        if not a.split("=", 1)[-1].startswith("[")
-    ):
-        return
+
+def _parse_error(overrides: Sequence[str]) -> str | None:
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser = OverridesParser.create()
+    for override in overrides:
+        try:
+            parser.parse_override(override)
+        except HydraException as exc:
+            return f"{override}: cannot be parsed ({_first_line(exc)})"
+    return None
+
+
+def _composed(overrides: list[str], check: bool) -> str | None:
+    """The error line for these overrides, or None: composed and, if ``check``, validated."""
     try:
-        validate(compose(argv))
+        cfg = compose(overrides)
+        if check:
+            validate(cfg)
     except ConfigError as exc:
-        _fail(str(exc))
+        return str(exc)
     except (HydraException, OmegaConfBaseException) as exc:
-        _fail(_first_line(exc))
+        return explain(exc, overrides)
+    return None
+
+
+def _sweep_jobs(overrides: list[str]) -> list[list[str]] | None:
+    """Each job's overrides, as Hydra's basic sweeper will run them (None for other sweepers)."""
+    if any(o.lstrip("+~").startswith("hydra/sweeper=") for o in overrides):
+        return None
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parsed = OverridesParser.create().parse_overrides(overrides)
+    return [job for batch in BasicSweeper.split_arguments(parsed, None) for job in batch]
+
+
+def check_command_line(argv: Sequence[str]) -> str | None:
+    """The one-line error for a command line that cannot run, or None (Hydra takes it from here).
+
+    A single run is composed and validated; a sweep's jobs are composed (each validates itself
+    when it runs, so that a bad job fails alone).
+    """
+    from hydra._internal.utils import get_args_parser
+
+    try:
+        args = get_args_parser().parse_args(list(argv))
+    except SystemExit:  # a flag Hydra does not know: Hydra says so itself
+        return None
+    if any(getattr(args, flag, None) for flag in _HYDRA_ONLY) or args.experimental_rerun:
+        return None
+    overrides = list(args.overrides)
+    if args.config_dir:
+        overrides.append(f"hydra.searchpath=[file://{args.config_dir}]")
+    if args.config_name not in (None, CONFIG_NAME):
+        return None
+    error = _parse_error(overrides)
+    if error or not args.multirun:
+        return error or _composed(overrides, check=True)
+    jobs = _sweep_jobs(overrides)
+    for job in jobs or []:
+        error = _composed(list(job), check=False)
+        if error:
+            return error
+    return None
 
 
 @hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name=CONFIG_NAME, version_base="1.3")
@@ -74,42 +154,50 @@ def train(cfg: DictConfig) -> float:
     # when they are imported (below).
     for noisy in ("absl", "OpenGL"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
-    from parallax.trainer import Trainer, format_summary
 
     # In a sweep a bad job must fail alone: exiting would take the launcher's worker (and with
-    # joblib every other job) down with it, so raise and let Hydra record the failure.
+    # joblib every other job) down with it, so raise (Hydra reports the one line: ConfigError is
+    # a compact Hydra exception) and let Hydra record the failure.
     in_sweep = HydraConfig.get().mode == RunMode.MULTIRUN
-    try:
-        validate(cfg)
-    except ConfigError as exc:
+
+    def refuse(key: str, value: object, reason: str) -> None:
         if in_sweep:
-            raise
-        _fail(str(exc))
+            raise ConfigError(key, value, reason)
+        _fail(str(ConfigError(key, value, reason)))
+
+    try:
+        validate(cfg)  # before the trainer exists: nothing but Hydra's .hydra/ is written yet
+    except ConfigError as exc:
+        refuse(exc.key, exc.value, exc.reason)
+    from parallax.trainer import Trainer, format_summary
+
     run_dir = HydraConfig.get().runtime.output_dir
     print(f"[parallax] run directory: {run_dir}", flush=True)
     trainer = Trainer(cfg, run_dir)
     if trainer.checkpoint_path.exists() and not cfg.resume:
         trainer.exp.close()
-        if in_sweep:
-            raise ConfigError("resume", f"false but {trainer.checkpoint_path} exists")
-        _fail(
-            f"resume=false but {trainer.checkpoint_path} exists; resume=true continues that run, "
-            "or choose another directory with hydra.run.dir=..."
+        refuse(
+            "resume",
+            False,
+            f"{trainer.checkpoint_path} exists; resume=true continues that run, or choose "
+            "another directory with hydra.run.dir=...",
         )
     if trainer.checkpoint_path.exists() and (trainer.run_dir / RUN_CONFIG_NAME).is_file():
-        # Run directories are named by the overrides only, so a default changed in conf/ since
-        # the run started would otherwise be resumed into a run trained with the old value.
-        changed = changed_settings(load_run_config(trainer.run_dir), cfg)
+        # Run directories are named by the overrides only: a run trained with another default
+        # would otherwise be continued with this one.
+        try:
+            changed = changed_settings(load_run_config(trainer.run_dir), cfg)
+        except ValueError as exc:
+            changed = [str(exc)]
         if changed:
             trainer.exp.close()
-            reason = (
-                f"{trainer.run_dir} was trained with other settings ({'; '.join(changed[:3])}"
-                f"{'; …' if len(changed) > 3 else ''}); pass them to continue it, or choose "
-                "another directory with hydra.run.dir=..."
+            refuse(
+                "resume",
+                True,
+                f"cannot resume {trainer.run_dir}, it was trained with other settings "
+                f"({'; '.join(changed[:3])}{'; …' if len(changed) > 3 else ''}); pass them to "
+                "continue it, or choose another directory with hydra.run.dir=...",
             )
-            if in_sweep:
-                raise ConfigError("resume", reason)
-            _fail(f"cannot resume: {reason}")
     try:
         summary = trainer.fit()
     finally:
@@ -120,7 +208,9 @@ def train(cfg: DictConfig) -> float:
 
 def main() -> None:
     register_resolvers()
-    prevalidate(sys.argv[1:])
+    error = check_command_line(sys.argv[1:])
+    if error:
+        _fail(error)
     train()
 
 

@@ -66,7 +66,20 @@ def test_coder_on_the_gpu_matches_the_cpu() -> None:
 
 
 def test_policy_on_the_gpu_matches_the_cpu() -> None:
-    policies = {device: NaturalActorCritic(576, 2, seed=3).to(device) for device in ("cpu", "cuda")}
+    # the published step sizes and θ alone as the state, as this test was written for
+    published = dict(
+        advantage_lr=0.025,
+        actor_lr=0.002,
+        weight_decay=0.01,
+        feature_norm="none",
+        zscore_horizon=0,
+        eye_position_reference_m=0.0,
+        reward_change_gain=0.0,
+    )
+    policies = {
+        device: NaturalActorCritic(576, 2, seed=3, **published).to(device)
+        for device in ("cpu", "cuda")
+    }
     generator = torch.Generator().manual_seed(0)
     states = [torch.rand(16, 576, generator=generator) * 0.012 for _ in range(20)]
     rewards = [-torch.rand(16, generator=generator) for _ in range(20)]
@@ -102,6 +115,7 @@ def test_distance_learner_on_the_gpu_matches_the_cpu() -> None:
             initial_epochs=20,
             epochs_per_call=3,
             seed=0,
+            lm={"weight_decay": 0.0},
         ).to(device)
         for device in ("cpu", "cuda")
     }
@@ -119,7 +133,9 @@ def test_distance_learner_on_the_gpu_matches_the_cpu() -> None:
         learners["cuda"].predict(pans[:10]), learners["cpu"].predict(pans[:10]), rtol=1e-8
     )
     # a state saved on the GPU loads into a CPU learner
-    cpu_copy = DistanceLearner(PAPER_LATERAL_POSITIONS_M, queue_size=40, hidden=5, seed=1)
+    cpu_copy = DistanceLearner(
+        PAPER_LATERAL_POSITIONS_M, queue_size=40, hidden=5, seed=1, lm={"weight_decay": 0.0}
+    )
     cpu_copy.load_state_dict(learners["cuda"].state_dict())
     np.testing.assert_allclose(
         cpu_copy.predict(pans[:10]), learners["cpu"].predict(pans[:10]), rtol=1e-8

@@ -127,13 +127,14 @@ class MultiScaleCoder(nn.Module):
         self,
         scales: Sequence[str],
         scale_specs: Mapping[str, Mapping[str, Any]],
+        *,
+        seed: int,
+        image_size: int | Sequence[int],
         atoms: int = 288,
         sparsity: int = 10,
-        learning_rate: float = 0.2,
+        learning_rate: float = 0.01,
         normalisation: str = "per_half",
         learn: bool = True,
-        seed: int = 0,
-        image_size: int | Sequence[int] = 256,
         pursuit: str = "gram",
     ) -> None:
         super().__init__()

@@ -12,14 +12,11 @@ function is unchanged by the refit, so the warm start really starts where the la
 μ is carried from one fit to the next (the queue changes by one sample); if a fit ended with
 μ > mu_max the next one starts again from the initial μ. The reported ``loss`` is the mean
 squared error in m² over the queue after the fit (LM itself minimises the sum of squares).
-
-Beyond the paper: with ``outlier_mads`` set, each fit leaves out the queued vectors that disagree
-with their neighbours (runaway pursuits; ``parallax.distance.consistency``). The queue itself is
-the paper's.
 """
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Mapping, Sequence
 
@@ -27,34 +24,34 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from parallax.distance.consistency import check_settings, consistent_mask
 from parallax.distance.levenberg_marquardt import LevenbergMarquardt
 from parallax.distance.network import DistanceMLP
 from parallax.distance.queue_memory import QueueMemory
 from parallax.distance.targets import TargetSource, make_target_source
 from parallax.distance.weighting import position_weights, sensitive_positions
 
+#: The sensitivity test of §3.5.1 (parallax.distance.weighting.sensitive_positions).
 DEFAULT_SENSITIVITY = {"patch": 10, "subsample": 8.0, "nearest_distance": 3.0, "tolerance": 2.5}
-DEFAULT_LM = {
-    "mu": 1e-3,
-    "mu_decrease": 0.1,
-    "mu_increase": 10.0,
-    "mu_max": 1e10,
-    "min_grad": 1e-7,
-    "max_params": 5000,
-    "max_jacobian_elements": 20_000_000,
-    "weight_decay": 0.0,
-}
+#: The Levenberg–Marquardt options ``lm`` may set: LevenbergMarquardt's keyword arguments, whose
+#: defaults are the ones used when ``lm`` leaves them out.
+LM_OPTIONS = tuple(
+    name
+    for name, parameter in inspect.signature(LevenbergMarquardt).parameters.items()
+    if parameter.kind is inspect.Parameter.KEYWORD_ONLY
+)
 STATE_VERSION = 1
 
 
 def _merged(
-    name: str, defaults: Mapping[str, float], given: Mapping[str, float] | None
+    name: str,
+    known: Sequence[str],
+    defaults: Mapping[str, float],
+    given: Mapping[str, float] | None,
 ) -> dict[str, float]:
     given = dict(given or {})
-    unknown = sorted(set(given) - set(defaults))
+    unknown = sorted(set(given) - set(known))
     if unknown:
-        raise ValueError(f"unknown {name} keys {unknown}; expected some of {sorted(defaults)}")
+        raise ValueError(f"unknown {name} keys {unknown}; expected some of {sorted(known)}")
     return {**defaults, **given}
 
 
@@ -68,6 +65,8 @@ class DistanceLearner:
     def __init__(
         self,
         lateral_positions: Sequence[float],
+        *,
+        seed: int,
         queue_size: int = 300,
         hidden: int = 30,
         weighting: bool = True,
@@ -77,15 +76,13 @@ class DistanceLearner:
         initial_epochs: int = 100,
         lm: Mapping[str, float] | None = None,
         targets: str | TargetSource = "ground_truth",
-        seed: int = 0,
         input_scaling: str = "global",
-        outlier_mads: float | None = None,
-        outlier_neighbours: int = 8,
     ) -> None:
         self.lateral_positions = [float(value) for value in lateral_positions]
         if not self.lateral_positions or not all(math.isfinite(v) for v in self.lateral_positions):
             raise ValueError(
-                f"lateral_positions must be a non-empty list of finite metres, got {lateral_positions!r}"
+                "lateral_positions must be a non-empty list of finite metres, "
+                f"got {lateral_positions!r}"
             )
         for name, value in (
             ("epochs_per_call", epochs_per_call),
@@ -94,10 +91,9 @@ class DistanceLearner:
             if int(value) != value or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         self.epochs_per_call, self.initial_epochs = int(epochs_per_call), int(initial_epochs)
-        check_settings(outlier_mads, outlier_neighbours)
-        self.outlier_mads = None if outlier_mads is None else float(outlier_mads)
-        self.outlier_neighbours = int(outlier_neighbours)
-        self.sensitivity = _merged("sensitivity", DEFAULT_SENSITIVITY, sensitivity)
+        self.sensitivity = _merged(
+            "sensitivity", DEFAULT_SENSITIVITY, DEFAULT_SENSITIVITY, sensitivity
+        )
         self.sensitive = sensitive_positions(self.lateral_positions, **self.sensitivity)
         flags = self.sensitive if weighting else [False] * len(self.lateral_positions)
         self.weights = torch.tensor(
@@ -110,7 +106,7 @@ class DistanceLearner:
             input_scaling,
             generator=torch.Generator().manual_seed(int(seed)),
         )
-        self.optimizer = LevenbergMarquardt(self.network, **_merged("lm", DEFAULT_LM, lm))
+        self.optimizer = LevenbergMarquardt(self.network, **_merged("lm", LM_OPTIONS, {}, lm))
         self.queue = QueueMemory(queue_size, len(self.lateral_positions))
         self.target_source = make_target_source(targets)
         self.fits = 0
@@ -128,7 +124,8 @@ class DistanceLearner:
         inputs = inputs.detach().to(device=self.weights.device, dtype=torch.float64)
         if inputs.shape[-1:] != self.weights.shape or inputs.dim() > 2:
             raise ValueError(
-                f"pans must have shape (r,) or (n, r) with r={self.weights.numel()}, got {tuple(inputs.shape)}"
+                f"pans must have shape (r,) or (n, r) with r={self.weights.numel()}, "
+                f"got {tuple(inputs.shape)}"
             )
         if not bool(torch.isfinite(inputs).all()):
             raise ValueError(
@@ -143,14 +140,13 @@ class DistanceLearner:
 
         trained (0/1), loss (MSE in m² over the vectors the fit used, after the fit; NaN before
         the first fit), rmse_m, epochs (accepted LM steps), mu, grad_norm (‖Jᵀe‖ at the last
-        epoch), stopped_min_grad, stopped_mu_max, stopped_non_finite (0/1), queue_fill and
-        outliers (queued vectors the fit left out, see ``parallax.distance.consistency``; always
-        0 with ``outlier_mads`` null).
+        epoch), stopped_min_grad, stopped_mu_max, stopped_non_finite (0/1) and queue_fill.
         """
         inputs = self._as_inputs(s)
         if inputs.dim() != 1:
             raise ValueError(
-                f"observe takes one vector s of shape ({self.weights.numel()},), got {tuple(inputs.shape)}"
+                f"observe takes one vector s of shape ({self.weights.numel()},), "
+                f"got {tuple(inputs.shape)}"
             )
         return self.observe_batch(inputs[None, :], [distance])
 
@@ -183,7 +179,6 @@ class DistanceLearner:
             "stopped_mu_max": 0.0,
             "stopped_non_finite": 0.0,
             "queue_fill": float(self.queue.fill),
-            "outliers": 0.0,
         }
         if not self.queue.is_full:
             return stats
@@ -194,9 +189,6 @@ class DistanceLearner:
         if self.optimizer.mu > self.optimizer.mu_max:
             self.optimizer.mu = self.optimizer.initial_mu
         inputs, targets = self.queue.inputs, self.queue.targets
-        if self.outlier_mads is not None:
-            keep = consistent_mask(inputs, targets, self.outlier_mads, self.outlier_neighbours)
-            inputs, targets = inputs[keep], targets[keep]
         weighted = inputs * self.weights
         self.network.fit_scaling(weighted, targets, preserve_function=self.fits > 0)
         epochs = self.initial_epochs if self.fits == 0 else self.epochs_per_call
@@ -218,7 +210,6 @@ class DistanceLearner:
             stopped_min_grad=float(result.stop == "min_grad"),
             stopped_mu_max=float(result.stop == "mu_max"),
             stopped_non_finite=float(result.stop == "non_finite_jacobian"),
-            outliers=float(self.queue.fill - targets.numel()),
         )
 
     def predict(self, S: Tensor | np.ndarray | Sequence[Sequence[float]]) -> Tensor | np.ndarray:
@@ -237,7 +228,8 @@ class DistanceLearner:
         return distances.to(S.device) if isinstance(S, Tensor) else distances.cpu().numpy()
 
     def to(self, device: torch.device | str) -> DistanceLearner:
-        """Moves the network, the queue and the input weights to ``device`` (in place; returns self).
+        """Moves the network, the queue and the input weights to ``device`` (in place; returns
+        self).
 
         Fits then run there; ``observe`` and ``predict`` accept inputs on any device.
         """

@@ -75,7 +75,7 @@ class LevenbergMarquardt:
         min_grad: float = 1e-7,
         max_params: int = 5000,
         max_jacobian_elements: int = 20_000_000,
-        weight_decay: float = 0.0,
+        weight_decay: float = 0.1,
     ) -> None:
         self.model = model
         self.weight_decay = float(weight_decay)
@@ -184,7 +184,8 @@ class LevenbergMarquardt:
         if jacobian_elements > self.max_jacobian_elements:
             raise ValueError(
                 f"Jacobian of {residuals.numel()} residuals × {self.num_params} parameters = "
-                f"{jacobian_elements} elements exceeds max_jacobian_elements={self.max_jacobian_elements}"
+                f"{jacobian_elements} elements exceeds "
+                f"max_jacobian_elements={self.max_jacobian_elements}"
             )
 
         jacobian = self._jacobian(flat, closure, batch, per_sample).double()

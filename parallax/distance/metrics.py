@@ -36,7 +36,8 @@ def distance_error_by_range(
     estimates, truths = _as_array(d_hat), _as_array(d)
     if estimates.shape != truths.shape or truths.size == 0:
         raise ValueError(
-            f"d_hat and d must be non-empty and of equal length, got {estimates.size} and {truths.size}"
+            "d_hat and d must be non-empty and of equal length, "
+            f"got {estimates.size} and {truths.size}"
         )
     if not np.all(np.isfinite(truths)) or np.any(truths <= 0):
         bad = truths[~np.isfinite(truths) | (truths <= 0)][0]

@@ -50,7 +50,8 @@ class GroundTruthTargets(TargetSource):
         distance_m = float(distance_m)
         if not math.isfinite(distance_m) or distance_m <= 0:
             raise ValueError(
-                f"ground-truth distance must be a positive finite number of metres, got {distance_m!r}"
+                "ground-truth distance must be a positive finite number of metres, "
+                f"got {distance_m!r}"
             )
         return distance_m
 

@@ -10,7 +10,7 @@ Every OpenGL call of the process runs on one thread, :func:`gl_thread` (an OpenG
 current in one thread at a time). Renderers may be used from any thread: their calls are handed
 to it and waited for, or run at once when already on it. MuJoCo releases the GIL while it
 renders, so the experiment hands whole environment steps to this thread
-(:meth:`GLThread.submit`) and encodes the previous frames meanwhile (issue 7).
+(:meth:`GLThread.submit`) and encodes the previous frames meanwhile.
 
 Backend: see ``parallax.envs.backend`` (the user's ``MUJOCO_GL``, egl by default, one clear
 error when it cannot render).
@@ -38,7 +38,8 @@ mujoco = import_mujoco()
 EYE_GEOM_GROUPS = (0, 2)
 
 
-#: Nominal size of the shared contexts: each MuJoCo render context has its own offscreen framebuffer.
+#: Nominal size of the shared contexts: each MuJoCo render context has its own offscreen
+#: framebuffer.
 _NOMINAL_SIZE = 2048
 
 _LIVE_RENDERERS: weakref.WeakSet[SceneRenderer] = weakref.WeakSet()

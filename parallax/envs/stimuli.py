@@ -23,7 +23,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-#: Photographs for training textures (names of ``skimage.data`` loaders; motorcycle = its left view).
+#: Photographs for training textures (names of ``skimage.data`` loaders; motorcycle = its left
+#: view).
 TRAIN_PHOTOS = (
     "astronaut",
     "brick",
@@ -74,12 +75,24 @@ class StimulusSet:
         return int(self.textures.shape[1])
 
 
+class StimulusError(ValueError):
+    """A stimulus setting that cannot work: ``stimuli.<key>=<value>: <reason>``."""
+
+    def __init__(self, key: str, value: Any, reason: str):
+        super().__init__(f"stimuli.{key}={value!r}: {reason}")
+        self.key, self.value, self.reason = key, value, reason
+
+    def __reduce__(self):
+        return (type(self), (self.key, self.value, self.reason))
+
+
 _CACHE: dict[tuple, StimulusSet] = {}
 _PHOTO_CACHE: dict[str, np.ndarray] = {}
 
 
 def load_stimuli(settings: Mapping[str, Any] | None = None) -> StimulusSet:
-    """The texture set described by ``settings`` (keys: see ``SETTING_KEYS``), built once per process."""
+    """The texture set described by ``settings`` (keys: ``SETTING_KEYS``), built once per
+    process."""
     options = normalise_settings(settings)
     key = _cache_key(options)
     if key not in _CACHE:
@@ -88,11 +101,13 @@ def load_stimuli(settings: Mapping[str, Any] | None = None) -> StimulusSet:
 
 
 def normalise_settings(settings: Mapping[str, Any] | None) -> dict[str, Any]:
-    """Fill defaults and validate; raises ValueError naming the offending value."""
+    """Fill defaults and validate; raises StimulusError naming the offending value."""
     given = dict(settings or {})
     unknown = sorted(set(given) - set(SETTING_KEYS))
     if unknown:
-        raise ValueError(f"unknown stimuli setting(s) {unknown}; known: {list(SETTING_KEYS)}")
+        raise StimulusError(
+            unknown[0], given[unknown[0]], f"no such setting; known: {', '.join(SETTING_KEYS)}"
+        )
     options = {
         "source": "skimage",
         "split": "train",
@@ -103,39 +118,44 @@ def normalise_settings(settings: Mapping[str, Any] | None) -> dict[str, Any]:
         "kind": "dead_leaves",
         **given,
     }
-    if options["source"] not in SOURCES:
-        raise ValueError(f"stimuli.source={options['source']!r}: choose one of {SOURCES}")
-    if options["split"] not in SPLITS:
-        raise ValueError(f"stimuli.split={options['split']!r}: choose one of {SPLITS}")
-    if options["kind"] not in PROCEDURAL_KINDS:
-        raise ValueError(f"stimuli.kind={options['kind']!r}: choose one of {PROCEDURAL_KINDS}")
+    for key, choices in (("source", SOURCES), ("split", SPLITS), ("kind", PROCEDURAL_KINDS)):
+        if options[key] not in choices:
+            raise StimulusError(key, options[key], f"must be one of {', '.join(choices)}")
     resolution = options["resolution"]
     if (
         isinstance(resolution, bool)
         or not isinstance(resolution, (int, np.integer))
         or not 8 <= resolution <= 4096
     ):
-        raise ValueError(
-            f"stimuli.resolution={resolution!r}: expected an integer number of texels in [8, 4096]"
+        raise StimulusError(
+            "resolution", resolution, "must be a whole number of texels in [8, 4096]"
         )
+    seed = options["seed"]
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise StimulusError("seed", seed, "must be a whole number ≥ 0")
     count = options["count"]
     if count is not None and (
         isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1
     ):
-        raise ValueError(f"stimuli.count={count!r}: expected a positive integer or None")
+        raise StimulusError("count", count, "must be a whole number ≥ 1, or null (all)")
     if options["dir"] is not None and options["source"] != "dir":
-        # `stimuli.dir=<folder>` alone switches to the user's images; with procedural it is a mistake.
+        # `stimuli.dir=<folder>` alone switches to the user's images; with procedural it is a
+        # mistake.
         if options["source"] == "procedural":
-            raise ValueError(
-                f"stimuli.dir={options['dir']!r} is set but stimuli.source='procedural'; "
-                "set stimuli.dir=null or stimuli.source=dir"
+            raise StimulusError(
+                "dir",
+                options["dir"],
+                "is set but stimuli.source is procedural; set stimuli.dir=null or "
+                "stimuli.source=dir",
             )
         options["source"] = "dir"
     if options["source"] == "dir":
         if not options["dir"]:
-            raise ValueError("stimuli.source='dir' needs stimuli.dir=<folder of images>")
+            raise StimulusError(
+                "dir", options["dir"], "stimuli.source=dir needs a folder of images"
+            )
         if not Path(options["dir"]).expanduser().is_dir():
-            raise ValueError(f"stimuli.dir={options['dir']!r} is not a folder")
+            raise StimulusError("dir", options["dir"], "is not a folder")
     options["resolution"] = int(resolution)
     options["seed"] = int(options["seed"])
     options["count"] = None if count is None else int(count)
@@ -200,7 +220,7 @@ def _photo_crops(
             for index, name in enumerate(photos)
         ]
     except ValueError as error:
-        raise ValueError(f"stimuli.count={count}: {error}") from None
+        raise StimulusError("count", count, str(error)) from None
     # Interleave photographs, so that a small set still spans all of them.
     ordered = [crops[p][k] for k in range(per_photo) for p in range(len(photos))]
     return [t for t, _ in ordered[:count]], [n for _, n in ordered[:count]]
@@ -279,21 +299,22 @@ def _folder_images(
             continue
         textures.append(_resize_square(cv2.cvtColor(image, cv2.COLOR_BGR2RGB), resolution))
         names.append(path.name)
+    if not textures:
+        raise StimulusError(
+            "dir",
+            folder_name,
+            f"holds no readable image ({len(skipped)} file(s) tried); put PNG, JPEG, BMP or "
+            "TIFF images there",
+        )
+    if count is not None and len(textures) < count:
+        raise StimulusError(
+            "count", count, f"the folder {folder_name} has only {len(textures)} readable image(s)"
+        )
     if skipped:
         warnings.warn(
             f"stimuli.dir={folder_name!r}: skipped {len(skipped)} unreadable file(s): "
             f"{', '.join(skipped)}",
             stacklevel=3,
-        )
-    if not textures:
-        raise ValueError(
-            f"stimuli.dir={folder_name!r} has no usable image "
-            f"(files tried: {len(skipped)}); put PNG/JPEG/BMP/TIFF images there"
-        )
-    if count is not None and len(textures) < count:
-        raise ValueError(
-            f"stimuli.dir={folder_name!r} has {len(textures)} usable image(s), "
-            f"fewer than stimuli.count={count}"
         )
     return textures, names
 
@@ -345,6 +366,7 @@ def background_image(width: int, height: int) -> np.ndarray:
 
 
 __all__ = [
+    "StimulusError",
     "StimulusSet",
     "load_stimuli",
     "normalise_settings",

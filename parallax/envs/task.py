@@ -34,7 +34,8 @@ PAPER_DISTANCES = {"start": 3.0, "stop": 10.0, "step": 0.1}
 
 
 def distance_grid(distances: Sequence[float] | Mapping[str, float] | None) -> tuple[float, ...]:
-    """Distances (m) from a list, a {start, stop, step} grid (stop included) or None (the paper's)."""
+    """Distances (m) from a list, a {start, stop, step} grid (stop included) or None (the
+    paper's)."""
     if distances is None:
         distances = PAPER_DISTANCES
     if isinstance(distances, Mapping):
@@ -84,7 +85,8 @@ def check_lateral_positions(lateral_positions: Sequence[float]) -> tuple[float, 
 
 
 def _non_negative(name: str, value: Any, unit: str) -> float:
-    """``value`` as a float, or a one-line error naming ``name`` if it is not a finite number ≥ 0."""
+    """``value`` as a float, or a one-line error naming ``name`` if it is not a finite number
+    ≥ 0."""
     if (
         isinstance(value, bool)
         or not isinstance(value, (int, float))
@@ -107,7 +109,6 @@ class LateralPursuitTask(base.Task):
         max_pan_increment_deg: float = max(ACTION_SET_DEG),
         random: Any = None,
         initial_pan_jitter_deg: float = 0.0,
-        initial_pan_jitter_deg_per_m: float = 0.0,
     ):
         super().__init__(random=random)
         if (
@@ -116,7 +117,8 @@ class LateralPursuitTask(base.Task):
             or trial_length < 2
         ):
             raise ValueError(
-                f"trial_length={trial_length!r}: expected an integer ≥ 2 (t_h iterations per position)"
+                f"trial_length={trial_length!r}: expected an integer ≥ 2 "
+                "(t_h iterations per position)"
             )
         if not isinstance(pan_reset, (bool, np.bool_)):
             raise ValueError(f"pan_reset={pan_reset!r}: expected True (reset to 0) or False (keep)")
@@ -130,11 +132,6 @@ class LateralPursuitTask(base.Task):
             )
         self._initial_pan_jitter = _non_negative(
             "initial_pan_jitter_deg", initial_pan_jitter_deg, "degrees"
-        )
-        self._initial_pan_jitter_per_m = _non_negative(
-            "initial_pan_jitter_deg_per_m",
-            initial_pan_jitter_deg_per_m,
-            "degrees per metre of lateral step",
         )
         self._pending_positions = check_lateral_positions(lateral_positions)
         self._episode_positions = self._pending_positions
@@ -189,7 +186,8 @@ class LateralPursuitTask(base.Task):
     def set_next_stimulus(
         self, texture_index: int | None = None, distance: float | None = None
     ) -> None:
-        """Force the next reset's texture and/or distance (one reset only; the random draws still happen)."""
+        """Force the next reset's texture and/or distance (one reset only; the random draws
+        still happen)."""
         if texture_index is not None:
             if (
                 isinstance(texture_index, bool)
@@ -210,8 +208,9 @@ class LateralPursuitTask(base.Task):
         return self._start_jitter_enabled
 
     def set_start_jitter(self, enabled: bool) -> None:
-        """Let trials from the next one on start from the configured jitter (True) or from pan 0 as
-        in the paper (False); the trainer turns it off after ``train.start_jitter_presentations``."""
+        """Let trials from the next one on start from the configured jitter (True) or from pan 0
+        as in the paper (False); the trainer turns it off after
+        ``train.start_jitter_presentations``."""
         if not isinstance(enabled, (bool, np.bool_)):
             raise ValueError(f"start jitter must be True or False, got {enabled!r}")
         self._start_jitter_enabled = bool(enabled)
@@ -250,7 +249,7 @@ class LateralPursuitTask(base.Task):
         reference.setflags(write=False)
         self._reference = reference
         physics.set_lateral_position(self._episode_positions[0])
-        physics.set_pan_deg(self._trial_start_pan(self._episode_positions[0]))
+        physics.set_pan_deg(self._trial_start_pan())
         self._position_index = 0
         self._iteration = 0
 
@@ -265,17 +264,14 @@ class LateralPursuitTask(base.Task):
         self._iteration = 0
         physics.set_lateral_position(self._episode_positions[self._position_index])
         if self._pan_reset:
-            physics.set_pan_deg(
-                self._trial_start_pan(self._episode_positions[self._position_index])
-            )
+            physics.set_pan_deg(self._trial_start_pan())
 
-    def _trial_start_pan(self, lateral_m: float) -> float:
-        """The pan a trial starts from: 0 (the paper), or uniform in ±(initial_pan_jitter_deg +
-        initial_pan_jitter_deg_per_m·|l|) so that the eye also learns from the far side of the
-        target (beyond the paper). The part in proportion to the lateral step l keeps the start
-        near the target where α* is small (short steps). With no jitter nothing is drawn, so the
-        random stream is the paper setting's, as it is once the jitter is switched off."""
-        jitter = self._initial_pan_jitter + self._initial_pan_jitter_per_m * abs(float(lateral_m))
+    def _trial_start_pan(self) -> float:
+        """The pan a trial starts from: 0 (the paper), or uniform in ±initial_pan_jitter_deg so
+        that the eye also learns from the far side of the target (beyond the paper). With no
+        jitter nothing is drawn, so the random stream is the paper setting's, as it is once the
+        jitter is switched off."""
+        jitter = self._initial_pan_jitter
         if jitter == 0.0 or not self._start_jitter_enabled:
             return 0.0
         return float(self.random.uniform(-jitter, jitter))
@@ -361,7 +357,6 @@ def load(
     blur_sigma: float = 0.0,
     max_pan_increment_deg: float = max(ACTION_SET_DEG),
     initial_pan_jitter_deg: float = 0.0,
-    initial_pan_jitter_deg_per_m: float = 0.0,
 ) -> PursuitEnvironment:
     """The HOAP-3 lateral-pursuit world as a dm_control environment (see the module docstring).
 
@@ -381,7 +376,6 @@ def load(
         max_pan_increment_deg=max_pan_increment_deg,
         random=seed,
         initial_pan_jitter_deg=initial_pan_jitter_deg,
-        initial_pan_jitter_deg_per_m=initial_pan_jitter_deg_per_m,
     )
     physics = Physics.create(texture_set, image_size=image_size, max_distance_m=max(grid))
     physics.set_perturbation(

@@ -167,7 +167,7 @@ def test_full_coder_learns_and_becomes_shift_sensitive() -> None:
         for name in ("astronaut", "coffee", "chelsea", "brick", "gravel", "camera")
     ]
     held_out = [skimage.data.rocket(), skimage.data.immunohistochemistry()]
-    coder = MultiScaleCoder(["coarse", "fine"], SPECS, seed=0, image_size=256)
+    coder = MultiScaleCoder(["coarse", "fine"], SPECS, seed=0, image_size=256, learning_rate=0.2)
     rng = np.random.default_rng(0)
     rewards = []
     for _ in range(3000):

@@ -1,9 +1,9 @@
-"""Distance learner (paper §3.5–3.5.2): weighting, queue, scaling, targets, resume, config, metrics."""
+"""Distance learner (paper §3.5–3.5.2): weighting, queue, scaling, targets, resume, config,
+metrics."""
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +11,7 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
+from parallax.config import DistanceConfig
 from parallax.distance import (
     TARGET_SOURCES,
     DistanceLearner,
@@ -22,15 +23,17 @@ from parallax.distance import (
     register_target_source,
     sensitive_positions,
 )
+from parallax.geometry import disparity_score, effective_patch_size
 from parallax.tools.analysis.synthetic_pans import (
     PAPER_DISTANCES_M,
     PAPER_LATERAL_POSITIONS_M,
     paper_regression,
     parallax_pans,
 )
-from parallax.geometry import disparity_score, effective_patch_size
 
-CONFIG = Path(__file__).resolve().parents[2] / "conf" / "distance" / "mlp_lm.yaml"
+#: Plain Levenberg–Marquardt (trainlm): the numbers below are taken without the recipe's weight
+#: decay.
+TRAINLM = {"weight_decay": 0.0}
 SMALL_L = [0.05, 0.10, 0.15, 0.20]
 
 
@@ -42,6 +45,7 @@ def small_learner(**overrides) -> DistanceLearner:
         epochs_per_call=3,
         initial_epochs=20,
         seed=0,
+        lm=TRAINLM,
     )
     settings.update(overrides)
     return DistanceLearner(**settings)
@@ -111,7 +115,7 @@ def test_per_input_scaling_cancels_the_weighting_and_global_scaling_keeps_it():
     assert np.abs(predictions["global", True] - predictions["global", False]).max() > 1e-3
 
 
-# -- queue memory, eq. (9) -----------------------------------------------------------------------------
+# -- queue memory, eq. (9) -------------------------------------------------------------------------
 def test_queue_is_fifo_with_s1_newest():
     queue = QueueMemory(capacity=3, input_size=2)
     for k in range(1, 6):
@@ -164,7 +168,7 @@ def test_a_batch_of_vectors_is_queued_in_order_then_fitted_once():
 def test_learns_the_paper_regression():
     pans, distances = paper_regression(300, np.random.default_rng(0))
     learner = DistanceLearner(
-        PAPER_LATERAL_POSITIONS_M, queue_size=300, hidden=30, initial_epochs=60, seed=0
+        PAPER_LATERAL_POSITIONS_M, queue_size=300, hidden=30, initial_epochs=60, seed=0, lm=TRAINLM
     )
     stats = feed(learner, pans, distances)[-1]
     truth = np.repeat(PAPER_DISTANCES_M, 3)
@@ -178,7 +182,7 @@ def test_learns_the_paper_regression():
     assert errors["total"] < 3.0, errors  # ≈ 1 % here; the paper reports 1.3–2.7 %
 
 
-# -- network scaling ------------------------------------------------------------------------------------
+# -- network scaling -------------------------------------------------------------------------------
 def test_refitting_the_scaling_preserves_the_function():
     generator = torch.Generator().manual_seed(3)
     for scaling in ("global", "per_input"):
@@ -225,7 +229,7 @@ def test_bad_inputs_raise_clear_errors():
         small_learner(targets="self_supervised")
 
 
-# -- targets, resume, config -----------------------------------------------------------------------------
+# -- targets, resume, config -----------------------------------------------------------------------
 def test_target_sources_are_pluggable():
     class Halved(TargetSource):
         def __call__(self, s, distance_m):
@@ -262,7 +266,7 @@ def test_resume_continues_bit_identically():
 
 
 def test_the_hydra_config_instantiates_the_learner():
-    config = OmegaConf.load(CONFIG)
+    config = OmegaConf.structured(DistanceConfig)
     config.lateral_positions = PAPER_LATERAL_POSITIONS_M
     config.seed = 0
     learner = instantiate(config)
@@ -271,7 +275,7 @@ def test_the_hydra_config_instantiates_the_learner():
     assert learner.sensitive == [cm >= 15 for cm in range(5, 21)]
 
 
-# -- the distance-error metric, Tables 4–5 ------------------------------------------------------------------
+# -- the distance-error metric, Tables 4–5 ---------------------------------------------------------
 def test_distance_error_by_range():
     truth = np.array([3.0, 4.95, 3.0 + 20 * 0.1, 6.9, 7.0, 10.0])
     estimate = truth * np.array([1.1, 0.9, 1.02, 0.98, 1.05, 1.05])

@@ -16,6 +16,7 @@ from dm_env import test_utils
 from omegaconf import OmegaConf
 
 import parallax.envs
+from parallax.config import compose
 from parallax.tools import render as picture
 from parallax.tools.bench import envs as benchmark
 
@@ -62,7 +63,7 @@ def test_environment_is_a_dm_control_environment():
 
 
 def test_shipped_config_maps_onto_load():
-    cfg = OmegaConf.load(REPO / "conf" / "env" / "hoap3.yaml")
+    cfg = OmegaConf.create(OmegaConf.to_container(compose().env))  # conf/env/hoap3.yaml
     kwargs = OmegaConf.to_container(cfg, resolve=True)
     # `robots` is the trainer's (how many environments to make), not an argument of load().
     assert kwargs.pop("robots") == 1

@@ -1,4 +1,5 @@
-"""Stimulus textures: photographs shipped with scikit-image, a user's folder, procedural ablations."""
+"""Stimulus textures: photographs shipped with scikit-image, a user's folder, procedural
+ablations."""
 
 from __future__ import annotations
 
@@ -94,10 +95,13 @@ def test_user_folder_skips_unreadable_files_with_a_warning_naming_them(tmp_path)
 def test_user_folder_with_too_few_images_is_a_clear_error(tmp_path):
     (tmp_path / "a.png").write_bytes(b"garbage")
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        with pytest.raises(ValueError, match="no usable image"):
+        warnings.simplefilter("error")  # no warning besides the error: one message, not two
+        with pytest.raises(stimuli.StimulusError, match="no readable image") as error:
             stimuli.load_stimuli({"source": "dir", "dir": str(tmp_path)})
-        cv2.imwrite(str(tmp_path / "b.png"), np.zeros((8, 8, 3), np.uint8))
+    assert (error.value.key, error.value.value) == ("dir", str(tmp_path))
+    cv2.imwrite(str(tmp_path / "b.png"), np.zeros((8, 8, 3), np.uint8))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
         with pytest.raises(ValueError, match="stimuli.count=5"):
             stimuli.load_stimuli({"source": "dir", "dir": str(tmp_path), "count": 5})
     with pytest.raises(ValueError, match="not a folder"):
@@ -126,6 +130,7 @@ def test_procedural_textures_are_deterministic_and_split(kind):
         ({"colour": "red"}, "colour"),
         ({"source": "dir"}, "stimuli.dir"),
         ({"count": 400}, "400"),
+        ({"seed": -1}, "stimuli.seed=-1"),
     ],
 )
 def test_bad_settings_are_named(settings, named):

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import inspect
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +11,7 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
+from parallax.config import PolicyConfig
 from parallax.policy import FEATURE_NORMS, NaturalActorCritic
 from parallax.tools.analysis.synthetic_pursuit import (
     PursuitTaskConfig,
@@ -20,12 +20,22 @@ from parallax.tools.analysis.synthetic_pursuit import (
     train_on_synthetic_pursuit,
 )
 
-CONFIG = Path(__file__).resolve().parents[2] / "conf" / "policy" / "nac.yaml"
 SMALL_DIM = 12
+#: The settings these tests were written for: the published pursuit step sizes and θ alone as the
+#: state (the constructor's defaults are the recipe's, parallax/config/schema.py).
+PUBLISHED = dict(
+    advantage_lr=0.025,
+    actor_lr=0.002,
+    weight_decay=0.01,
+    feature_norm="none",
+    zscore_horizon=0,
+    eye_position_reference_m=0.0,
+    reward_change_gain=0.0,
+)
 
 
 def _policy(**overrides: object) -> NaturalActorCritic:
-    kwargs: dict = dict(state_dim=SMALL_DIM, num_scales=2, temperature=0.7, seed=3)
+    kwargs: dict = dict(state_dim=SMALL_DIM, num_scales=2, temperature=0.7, seed=3, **PUBLISHED)
     kwargs.update(overrides)
     return NaturalActorCritic(**kwargs)
 
@@ -167,7 +177,10 @@ def _small_task(seed: int) -> SyntheticPursuit:
 
 def _task_policy(task: SyntheticPursuit, seed: int, norm: str = "zscore") -> NaturalActorCritic:
     return NaturalActorCritic(
-        task.config.state_dim, task.config.num_scales, seed=seed, feature_norm=norm
+        task.config.state_dim,
+        task.config.num_scales,
+        seed=seed,
+        **{**PUBLISHED, "feature_norm": norm},
     )
 
 
@@ -263,13 +276,18 @@ def test_zscore_statistics_forget_beyond_their_horizon() -> None:
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_learns_to_correct_a_synthetic_pursuit_offset(seed: int) -> None:
     # Tuned, non-negative, ~0.006 activities with texture and noise; reward −|offset|.
-    # Settings as shipped in conf/policy/nac.yaml (except the run-time sizes, and without the
-    # reward-change entry: the synthetic task gives θ alone, the paper's state).
-    settings = OmegaConf.to_container(OmegaConf.load(CONFIG))
+    # The schema's settings (except the run-time sizes), with centred_unit features and without
+    # the eye-position and reward-change entries: the synthetic task gives θ alone.
+    settings = OmegaConf.to_container(OmegaConf.structured(PolicyConfig))
     config = PursuitTaskConfig(units_per_scale=96)
     task = SyntheticPursuit(num_robots=16, config=config, seed=seed)
     settings.update(
-        state_dim=config.state_dim, num_scales=config.num_scales, seed=seed, reward_change_gain=0.0
+        state_dim=config.state_dim,
+        num_scales=config.num_scales,
+        seed=seed,
+        feature_norm="centred_unit",
+        eye_position_reference_m=0.0,
+        reward_change_gain=0.0,
     )
     policy = instantiate(settings)
     before = correcting_fraction(policy, task)
@@ -279,7 +297,7 @@ def test_learns_to_correct_a_synthetic_pursuit_offset(seed: int) -> None:
 
 
 def test_config_instantiates_with_the_interface_keys() -> None:
-    settings = OmegaConf.load(CONFIG)
+    settings = OmegaConf.structured(PolicyConfig)
     assert settings["_target_"] == "parallax.policy.NaturalActorCritic"
     for key in ("state_dim", "num_scales", "seed"):
         assert OmegaConf.is_missing(settings, key), key

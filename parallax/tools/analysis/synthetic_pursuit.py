@@ -174,6 +174,19 @@ def train_on_synthetic_pursuit(
     return curve
 
 
+#: The published pursuit step sizes with θ alone as the state: what the study's curves start from
+#: (NaturalActorCritic's defaults are the recipe's, whose extra state entries this task lacks).
+PUBLISHED = dict(
+    advantage_lr=0.025,
+    actor_lr=0.002,
+    weight_decay=0.01,
+    feature_norm="none",
+    zscore_horizon=0,
+    eye_position_reference_m=0.0,
+    reward_change_gain=0.0,
+)
+
+
 def run_seeds(
     seeds: Sequence[int],
     steps: int,
@@ -182,13 +195,17 @@ def run_seeds(
     evaluations: int = 10,
     **policy_kwargs: object,
 ) -> list[list[CurvePoint]]:
-    """Learning curves of fresh policies (built with ``policy_kwargs``) for several seeds."""
+    """Learning curves of fresh policies for several seeds: the published pursuit settings
+    (``PUBLISHED``; the task gives θ alone) with ``policy_kwargs`` on top."""
     config = config or PursuitTaskConfig()
     curves = []
     for seed in seeds:
         task = SyntheticPursuit(num_robots, config, seed=seed)
         policy = NaturalActorCritic(
-            state_dim=config.state_dim, num_scales=config.num_scales, seed=seed, **policy_kwargs
+            state_dim=config.state_dim,
+            num_scales=config.num_scales,
+            seed=seed,
+            **{**PUBLISHED, **policy_kwargs},
         )
         curves.append(train_on_synthetic_pursuit(policy, task, steps, max(steps // evaluations, 1)))
     return curves

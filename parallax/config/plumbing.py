@@ -1,8 +1,8 @@
-"""Configuration plumbing for the Hydra apps: composing, naming run directories, validating.
+"""Hydra plumbing for the apps: composing the configuration, naming run directories, reading a
+run's saved configuration back and comparing it with another one.
 
-Hydra creates the run directory before the task function runs, so `parallax-train` composes
-and validates the configuration first (``compose`` + ``validate``) and only then hands over to
-Hydra: a bad config fails with one line naming the key and nothing is written.
+The settings themselves are in :mod:`parallax.config.schema`; their checks in
+:mod:`parallax.config.validate`.
 """
 
 from __future__ import annotations
@@ -15,23 +15,13 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from parallax.config.schema import Config, register
+
 #: The Hydra config package; ``conf/`` ships inside the installed package as ``parallax.conf``.
 CONFIG_MODULE = "parallax.conf"
 CONFIG_NAME = "config"
 #: File systems refuse names over 255 bytes; longer override lists keep a prefix and a hash.
 MAX_RUN_NAME = 120
-
-
-class ConfigError(ValueError):
-    """A configuration value that cannot work; the message names the key."""
-
-    def __init__(self, key: str, reason: str):
-        super().__init__(f"{key}: {reason}")
-        self.key, self.reason = key, reason
-
-    def __reduce__(self):
-        # Launchers (joblib, submitit) send a failed job's exception back by pickling it.
-        return (type(self), (self.key, self.reason))
 
 
 def run_name(override_dirname: str) -> str:
@@ -57,6 +47,7 @@ def compose(overrides: Sequence[str] = ()) -> DictConfig:
     from hydra import initialize_config_module
     from hydra.core.global_hydra import GlobalHydra
 
+    register()
     register_resolvers()
     if GlobalHydra.instance().is_initialized():
         GlobalHydra.instance().clear()
@@ -67,13 +58,59 @@ def compose(overrides: Sequence[str] = ()) -> DictConfig:
 RUN_CONFIG_NAME = "config.yaml"
 
 
+def schema_keys(node: Any = None, prefix: str = "") -> set[str]:
+    """Every setting's dotted key (``env.stimuli.count``, …), from the schema (or ``node``).
+
+    The scale specs and the rotation axis hold values of the user's choosing (a scale's name, a
+    vector), so they count as one setting each.
+    """
+    node = OmegaConf.structured(Config) if node is None else node
+    keys: set[str] = set()
+    for key in node.keys():
+        dotted = f"{prefix}{key}"
+        value = node._get_node(key)
+        if OmegaConf.is_dict(value) and dotted not in OPAQUE_KEYS and not value._is_none():
+            keys |= schema_keys(value, dotted + ".")
+        else:
+            keys.add(dotted)
+    return keys
+
+
+def closest_key(key: str) -> str | None:
+    """The schema's setting nearest to a misspelt ``key`` (None if none is near)."""
+    import difflib
+
+    close = difflib.get_close_matches(key, sorted(schema_keys()), n=1, cutoff=0.75)
+    return close[0] if close else None
+
+
+#: Settings whose value is a mapping or list of the user's choosing, compared as a whole.
+OPAQUE_KEYS = frozenset({"coder.scale_specs", "perturbation.rotation_axis"})
+
+
 def load_run_config(run_dir: str | Path) -> DictConfig:
-    """The configuration a run was composed with (``<run>/config.yaml``, written by the trainer)."""
+    """The configuration a run was trained with (``<run>/config.yaml``, written by the trainer),
+    typed by the schema.
+
+    The file must hold every setting of the schema and nothing else: a setting it lacks is not
+    given a value here (that would be a guess about how the run was trained), and one the schema
+    no longer has cannot be honoured. Either is a ValueError naming the keys.
+    """
     path = Path(run_dir) / RUN_CONFIG_NAME
     if not path.is_file():
         raise FileNotFoundError(f"{run_dir} is not a parallax run directory (no {RUN_CONFIG_NAME})")
     register_resolvers()
-    return OmegaConf.load(path)
+    saved = OmegaConf.load(path)
+    have, want = schema_keys(saved), schema_keys()
+    missing, unknown = sorted(want - have), sorted(have - want)
+    if missing or unknown:
+        parts = [f"lacks {', '.join(missing)}"] if missing else []
+        parts += [f"has settings parallax does not know: {', '.join(unknown)}"] if unknown else []
+        raise ValueError(
+            f"{path} {'; '.join(parts)} (a run's config.yaml holds every setting of "
+            "parallax/config/schema.py with the value the run was trained with)"
+        )
+    return OmegaConf.merge(OmegaConf.structured(Config), saved)
 
 
 #: Settings that never change a run's results (the same list as the run-directory name ignores
@@ -109,29 +146,16 @@ def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
     return flat
 
 
-#: Settings added to conf/ after runs had been made without them, with the value such runs were
-#: trained with: a saved config that lacks one of them is read as having that value, so adding a
-#: setting neither blocks resuming old runs nor makes it look like an ablation in a report.
-SETTINGS_ADDED_LATER: dict[str, Any] = {
-    "distance.outlier_mads": None,
-    "distance.lm.weight_decay": 0.0,
-    "env.initial_pan_jitter_deg_per_m": 0.0,
-    "policy.eye_position_reference_m": 0.0,
-    "policy.reward_change_gain": 0.0,
-    "train.start_jitter_presentations": None,
-    "train.distance_readout": "last",
-}
-
-
 def run_settings(config: dict) -> dict[str, Any]:
-    """``flatten(config)`` with SETTINGS_ADDED_LATER filled in where the config predates them."""
-    return {**SETTINGS_ADDED_LATER, **flatten(config)}
+    """A run's settings as ``flatten`` gives them (its saved config holds every setting)."""
+    return flatten(config)
 
 
 def changed_settings(saved: DictConfig, current: DictConfig) -> list[str]:
     """``key: saved → current`` for every setting that differs between a run's saved config and
-    the config it is being resumed with (RESUMABLE_CHANGES aside). A default changed in conf/
-    since the run started shows up here, so a resumed run never mixes two settings silently."""
+    the config it is being resumed with (RESUMABLE_CHANGES aside). A default that differs from
+    the one the run was trained with shows up here, so a resumed run never mixes two settings
+    silently."""
     saved_dict = OmegaConf.to_container(saved, resolve=True)
     current_dict = OmegaConf.to_container(current, resolve=True)
     before, after = run_settings(saved_dict), run_settings(current_dict)
@@ -172,119 +196,13 @@ DISTANCE_READOUTS = tuple(READOUT_PANS)
 
 
 def distance_readout(cfg) -> str:
-    """The run's ``train.distance_readout`` ("last" for runs saved before it existed)."""
-    return str((cfg.get("train") or {}).get("distance_readout") or "last")
+    """The run's ``train.distance_readout`` (``cfg``: a DictConfig or a plain dict)."""
+    return str(cfg["train"]["distance_readout"])
 
 
 def start_jitter_on(cfg, presentation: int) -> bool:
     """Whether presentation ``presentation`` (0-based) starts its trials from the jittered pan of
-    ``env.initial_pan_jitter_deg…``: always when ``train.start_jitter_presentations`` is null,
+    ``env.initial_pan_jitter_deg``: always when ``train.start_jitter_presentations`` is null,
     else only before that many presentations (the trainer and parallax-eval both use this)."""
-    limit = (cfg.get("train") or {}).get("start_jitter_presentations")
+    limit = cfg["train"]["start_jitter_presentations"]
     return limit is None or int(presentation) < int(limit)
-
-
-def _require(cond: bool, key: str, reason: str) -> None:
-    if not cond:
-        raise ConfigError(key, reason)
-
-
-def validate(cfg: DictConfig) -> None:
-    """Raise ConfigError for the first value that cannot work."""
-    lateral = list(cfg.curriculum.lateral_positions)
-    _require(len(lateral) > 0, "curriculum.lateral_positions", "the lateral list L is empty")
-    _require(
-        all(isinstance(v, (int, float)) for v in lateral),
-        "curriculum.lateral_positions",
-        f"must be numbers in metres, got {lateral}",
-    )
-    _require(
-        all(b > a for a, b in zip(lateral, lateral[1:])),
-        "curriculum.lateral_positions",
-        f"must be strictly increasing, got {lateral}",
-    )
-    if cfg.curriculum.get("stages"):
-        for i, stage in enumerate(cfg.curriculum.stages):
-            _require(
-                len(stage) > 0 and set(stage) <= set(lateral),
-                f"curriculum.stages[{i}]",
-                f"must be a non-empty subset of curriculum.lateral_positions, got {list(stage)}",
-            )
-        _require(
-            list(cfg.curriculum.stages[-1]) == lateral,
-            "curriculum.stages",
-            "the last stage must equal curriculum.lateral_positions",
-        )
-    _require(
-        int(cfg.env.trial_length) >= 2,
-        "env.trial_length",
-        f"needs at least 2 iterations per trial, got {cfg.env.trial_length}",
-    )
-    _require(
-        int(cfg.env.get("robots", 1)) >= 1,
-        "env.robots",
-        f"must be ≥ 1, got {cfg.env.get('robots')}",
-    )
-    _require(
-        int(cfg.distance.queue_size) >= 1,
-        "distance.queue_size",
-        f"the queue size c must be ≥ 1, got {cfg.distance.queue_size}",
-    )
-    scales = list(cfg.coder.scales)
-    _require(len(scales) > 0, "coder.scales", "needs at least one scale")
-    for s in scales:
-        _require(
-            s in cfg.coder.scale_specs,
-            "coder.scales",
-            f"unknown scale {s!r}; known: {sorted(cfg.coder.scale_specs)}",
-        )
-        window = int(cfg.coder.scale_specs[s].window)
-        _require(
-            window <= int(cfg.env.image_size),
-            f"coder.scale_specs.{s}.window",
-            f"window {window} px is larger than the image (env.image_size={cfg.env.image_size})",
-        )
-    _require(
-        int(cfg.train.presentations) >= 1,
-        "train.presentations",
-        f"must be ≥ 1, got {cfg.train.presentations}",
-    )
-    _require(
-        int(cfg.train.checkpoint_every) >= 1,
-        "train.checkpoint_every",
-        f"must be ≥ 1, got {cfg.train.checkpoint_every}",
-    )
-    _require(
-        int(cfg.metrics.mae_window) >= 1,
-        "metrics.mae_window",
-        f"must be ≥ 1, got {cfg.metrics.mae_window}",
-    )
-    _require(
-        cfg.device in ("cpu", "cuda") or str(cfg.device).startswith("cuda:"),
-        "device",
-        f"must be cpu or cuda, got {cfg.device!r}",
-    )
-    jitter_limit = cfg.train.get("start_jitter_presentations")
-    _require(
-        jitter_limit is None
-        or (
-            isinstance(jitter_limit, int)
-            and not isinstance(jitter_limit, bool)
-            and jitter_limit >= 0
-        ),
-        "train.start_jitter_presentations",
-        f"must be null or a whole number of presentations ≥ 0, got {jitter_limit!r}",
-    )
-    readout = cfg.train.get("distance_readout", "last")
-    _require(
-        readout in DISTANCE_READOUTS,
-        "train.distance_readout",
-        f"must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}",
-    )
-    start = cfg.perturbation.get("start_fraction")
-    if start is not None:
-        _require(
-            0.0 <= float(start) <= 1.0,
-            "perturbation.start_fraction",
-            f"must be between 0 and 1, got {start}",
-        )

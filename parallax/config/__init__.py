@@ -1,0 +1,86 @@
+"""The configuration of `parallax-train` and the tools: the schema, its checks, the Hydra plumbing.
+
+``schema``    every setting as a typed dataclass field with its one default (registered in
+              Hydra's ConfigStore on import; conf/ files extend it)
+``validate``  ranges and cross-field rules, checked before anything is written
+``plumbing``  composing, run-directory names, reading a run's saved config back, comparing two
+``errors``    ConfigError, the one-line ``key=value: reason`` error
+"""
+
+from parallax.config.errors import ConfigError, format_value
+from parallax.config.plumbing import (
+    CONFIG_MODULE,
+    CONFIG_NAME,
+    DISTANCE_READOUTS,
+    MAX_RUN_NAME,
+    OPAQUE_KEYS,
+    READOUT_PANS,
+    RESULT_NEUTRAL_KEYS,
+    RESUMABLE_CHANGES,
+    RUN_CONFIG_NAME,
+    changed_settings,
+    compose,
+    distance_readout,
+    flatten,
+    freeze_value,
+    load_run_config,
+    perturbation_start,
+    register_resolvers,
+    run_name,
+    run_settings,
+    schema_keys,
+    start_jitter_on,
+)
+from parallax.config.schema import (
+    CoderConfig,
+    Config,
+    CurriculumConfig,
+    DistanceConfig,
+    EnvConfig,
+    MetricsConfig,
+    PerturbationConfig,
+    PolicyConfig,
+    TrainConfig,
+    register,
+)
+from parallax.config.validate import RUN_TIME_KEYS, validate
+
+register()
+
+__all__ = [
+    "CONFIG_MODULE",
+    "CONFIG_NAME",
+    "DISTANCE_READOUTS",
+    "MAX_RUN_NAME",
+    "OPAQUE_KEYS",
+    "READOUT_PANS",
+    "RESULT_NEUTRAL_KEYS",
+    "RESUMABLE_CHANGES",
+    "RUN_CONFIG_NAME",
+    "RUN_TIME_KEYS",
+    "CoderConfig",
+    "Config",
+    "ConfigError",
+    "CurriculumConfig",
+    "DistanceConfig",
+    "EnvConfig",
+    "MetricsConfig",
+    "PerturbationConfig",
+    "PolicyConfig",
+    "TrainConfig",
+    "changed_settings",
+    "compose",
+    "distance_readout",
+    "flatten",
+    "format_value",
+    "freeze_value",
+    "load_run_config",
+    "perturbation_start",
+    "register",
+    "register_resolvers",
+    "run_name",
+    "run_settings",
+    "schema_keys",
+    "start_jitter_on",
+    "validate",
+]

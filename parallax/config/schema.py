@@ -1,0 +1,359 @@
+"""The structured-config schema: every setting of `parallax-train`, its type and its one default.
+
+One dataclass per config group, registered in Hydra's ConfigStore (:func:`register`): the files
+in conf/<group>/ extend their group's ``schema`` node (Hydra's "static schema with many
+configs") and hold only what makes that choice differ, so Hydra checks every value's type and
+the defaults live here alone. The defaults are our recipe: the paper's model (section and
+equation numbers below are the paper's) with the settings marked "beyond the paper", which
+docs/improvements.md explains; conf/experiment/paper_*.yaml switch those off again. Values known
+only at run time (sizes, seeds the trainer derives) are ``MISSING`` (``???``) and filled before
+instantiation. Ranges and cross-field rules are checked by :mod:`parallax.config.validate`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from omegaconf import MISSING
+
+#: The paper's lateral list for multiple positions 5–20 cm in 1 cm steps (§4.2.1), in metres.
+LATERAL_5_20_M = [round(0.05 + 0.01 * i, 2) for i in range(16)]
+#: The name under which each group's schema node is stored (conf/<group>/ files extend it).
+SCHEMA_NODE = "schema"
+
+
+# --- the world (env/) ------------------------------------------------------------------------
+@dataclass
+class DistanceGridConfig:
+    """Panel distances drawn per presentation, metres: start, start + step, …, stop (§4.1)."""
+
+    start: float = 3.0
+    stop: float = 10.0
+    step: float = 0.1
+
+
+@dataclass
+class StimuliConfig:
+    """The panel's textures, "a set of 100 different images" (§4.1); parallax.envs.stimuli."""
+
+    #: skimage: crops of the photographs scikit-image ships | dir: your own images (``dir``) |
+    #: procedural: generated textures (``kind``), an ablation.
+    source: str = "skimage"
+    #: train | heldout: held-out crops come from other photographs (a folder is used whole).
+    split: str = "train"
+    #: Number of textures; null: 120 train / 40 held-out, or every readable image of ``dir``.
+    count: int | None = None
+    #: Folder of your own images; setting it switches ``source`` to dir.
+    dir: str | None = None
+    #: Texture side in texels.
+    resolution: int = 256
+    #: Seed of the crop positions / procedural textures (not of the presentation order).
+    seed: int = 0
+    #: Procedural kind: dead_leaves | pink_noise.
+    kind: str = "dead_leaves"
+
+
+@dataclass
+class EnvConfig:
+    """The world (§4.1): HOAP-3-like humanoid, textured panel, still background, in MuJoCo.
+
+    The keyword arguments of ``parallax.envs.load`` (``robots`` aside); the lateral list L comes
+    from ``curriculum`` and the perturbation from ``perturbation``.
+    """
+
+    #: Side of the square left-eye image in pixels; the focal length stays 531 px (Table 1).
+    image_size: int = 256
+    #: t_h, iterations (eye movements) per lateral position (§4.1).
+    trial_length: int = 30
+    #: The paper's distances 3.0, 3.1, …, 10.0 m (§4.1).
+    distances: DistanceGridConfig = field(default_factory=DistanceGridConfig)
+    #: At each new lateral position: true turns the pan back to 0 (§3.2), false keeps it.
+    pan_reset: bool = True
+    #: Beyond the paper: each trial starts from a pan drawn uniformly in ±this many degrees
+    #: instead of 0, so the eye also learns from the far side of the target (0: the paper).
+    initial_pan_jitter_deg: float = 2.0
+    #: Largest pan increment the world accepts, degrees (A = {±0.2, ±0.1, ±0.05, 0}, §3.4).
+    max_pan_increment_deg: float = 0.2
+    stimuli: StimuliConfig = field(default_factory=StimuliConfig)
+    #: B robots in lockstep, each with its own stimulus, distance and pan; one coder and policy
+    #: call serves all of them (beyond the paper, for speed; B = 1 is the paper's single robot).
+    robots: int = 1
+
+
+# --- the sensory coder (coder/) --------------------------------------------------------------
+@dataclass
+class ScaleSpecConfig:
+    """One scale of §3.3 / Fig. 5: centre window, Gaussian-pyramid sub-sampling P_s, patch side
+    P_l and the patches' stride, all in pixels."""
+
+    window: int = MISSING
+    subsample: int = MISSING
+    patch: int = MISSING
+    stride: int = MISSING
+
+
+def _paper_scales() -> dict[str, ScaleSpecConfig]:
+    # §3.3: coarse 250 px sub-sampled ×8 (32×32 px → 529 patches at stride 1), fine 150 px
+    # sub-sampled ×2 (75×75 px → 289 patches at stride 4); 10×10 px patches
+    return {
+        "coarse": ScaleSpecConfig(window=250, subsample=8, patch=10, stride=1),
+        "fine": ScaleSpecConfig(window=150, subsample=2, patch=10, stride=4),
+    }
+
+
+@dataclass
+class CoderConfig:
+    """Sensory coding (§3.3, eqs. 1–6): matching pursuit on a learned binocular dictionary per
+    scale; the state θ = [θ^C; θ^F] (eq. 5) and the reward R = −(e^C + e^F) (eq. 6)."""
+
+    _target_: str = "parallax.coding.MultiScaleCoder"
+    #: The scales in use, in this order in the state; [coarse] or [fine] is the single-scale
+    #: ablation (§3.3 and its reference [4]).
+    scales: list[str] = field(default_factory=lambda: ["coarse", "fine"])
+    scale_specs: dict[str, ScaleSpecConfig] = field(default_factory=_paper_scales)
+    #: N, basis functions per scale (§3.3).
+    atoms: int = 288
+    #: k, matching-pursuit steps: non-zero coefficients per patch (§3.3).
+    sparsity: int = 10
+    #: η of the dictionaries' gradient step on the reconstruction error (§3.3, after eq. 4; the
+    #: paper gives no value): ΔΦ = η·R·Bᵀ/P.
+    learning_rate: float = 0.01
+    #: per_half: each eye's half of γ zero-mean and unit-norm (§3.3) | joint: the 200-vector.
+    normalisation: str = "per_half"
+    #: false freezes the dictionaries.
+    learn: bool = True
+    #: Filled by the trainer: the dictionaries' initialisation seed.
+    seed: int = MISSING
+    #: Filled by the trainer: env.image_size.
+    image_size: int = MISSING
+
+
+# --- the pursuit policy (policy/) ------------------------------------------------------------
+@dataclass
+class PolicyConfig:
+    """Pursuit policy (§3.4, eqs. 5–8): natural actor-critic, Bhatnagar et al. 2009 algorithm 3,
+    average reward, softmax over pan increments (step-size names as in NaturalActorCritic)."""
+
+    _target_: str = "parallax.policy.NaturalActorCritic"
+    #: Filled by the trainer: the coder's state size (2 scales × 288 bases = 576).
+    state_dim: int = MISSING
+    #: Filled by the trainer: the coder's number of scales.
+    num_scales: int = MISSING
+    #: The action set A, pan increments in degrees (§3.4).
+    actions: list[float] = field(default_factory=lambda: [-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2])
+    #: α_v, the critic's step size (the paper gives no step sizes).
+    critic_lr: float = 1.0
+    #: α_n, the advantage weights' step size (beyond the published pursuit setting 0.025).
+    advantage_lr: float = 0.1
+    #: α_p, the actor's step size (published 0.002: Θ → w/λ with time constant 1/(α_p·λ)).
+    actor_lr: float = 0.1
+    #: ξ in δ = r − J + ξ·v·φ′ − v·φ (algorithm 3 has 1; 0.3 as in active-efficient-coding code).
+    discount: float = 0.3
+    #: ζ, the average reward's step size.
+    reward_rate: float = 0.01
+    #: λ, the actor's weight decay: at rest the logits are ≈ advantage/λ, so a smaller λ gives a
+    #: sharper policy (published 0.01).
+    weight_decay: float = 0.004
+    #: T of the softmax, eq. (7).
+    temperature: float = 1.0
+    #: How θ becomes the features φ (parallax.policy.features): none (θ as in eq. 5) |
+    #: l1_per_scale | zscore | centred_unit | zscore_unit | difference. difference (beyond the
+    #: paper): θ(t) − θ(I0, I0), the state relative to the same stimulus at zero disparity,
+    #: scaled to norm ≤ 1; it removes texture-dependent offsets.
+    feature_norm: str = "difference"
+    #: States (robots × steps) the running feature statistics remember; 0: all of them.
+    zscore_horizon: int = 20000
+    #: Beyond the paper: d_ref (m) > 0 adds the eye's own position as one more feature,
+    #: ν = tan(pan)·d_ref/l clipped to [−1, 1], so one weight can say "turned too far" (0: off).
+    eye_position_reference_m: float = 0.5
+    #: Beyond the paper: gain > 0 adds the last pan step's relative change of reward, signed by
+    #: the step's direction, clip(gain·(r_t − r_{t−1})/|r_{t−1}|·sign(a_{t−1}), −1, 1), as one
+    #: more feature: the reward peaks at α*, so it tells a linear policy which way the peak lies
+    #: (0: off).
+    reward_change_gain: float = 10.0
+    #: Algorithm 3's projection Γ of the actor parameters Θ onto the ball of this radius after
+    #: each update (Bhatnagar et al. 2009); null: no projection, the weight decay λ bounds Θ.
+    actor_projection_radius: float | None = None
+    #: Filled by the trainer: seeds the action-sampling generator.
+    seed: int = MISSING
+
+
+# --- the distance learner (distance/) --------------------------------------------------------
+@dataclass
+class SensitivityConfig:
+    """Which lateral positions are sensitive (§3.5.1, eq. 10, Table 1): disparity score at the
+    nearest distance ≥ P_e − tolerance, with P_e = P_l·√P_s."""
+
+    #: P_l, the patch side in pixels.
+    patch: int = 10
+    #: P_s of the coarse scale, so P_e = 10·√8 ≈ 28.3 px.
+    subsample: float = 8.0
+    #: Metres; Table 1's disparity scores are at 3 m.
+    nearest_distance: float = 3.0
+    #: Pixels below P_e still counted as sensitive: 15 cm (26.6 px) is, 14 cm (24.8 px) is not
+    #: (the paper's "larger than or approximately equal to").
+    tolerance: float = 2.5
+
+
+@dataclass
+class LevenbergMarquardtConfig:
+    """The network's Levenberg–Marquardt fit (§3.5, [33]), with MATLAB trainlm's μ schedule."""
+
+    mu: float = 1.0e-3
+    mu_decrease: float = 0.1
+    mu_increase: float = 10.0
+    mu_max: float = 1.0e10
+    #: Stop when ‖Jᵀe‖ falls below this.
+    min_grad: float = 1.0e-7
+    #: Refuse larger models: the step solves a dense parameters × parameters system.
+    max_params: int = 5000
+    #: Refuse fits whose Jacobian (queued vectors × parameters) would be larger.
+    max_jacobian_elements: int = 20_000_000
+    #: Beyond trainlm: minimise Σe² + weight_decay·‖w‖² (w: all weights and biases, in the
+    #: network's scaled units); a queue of c = 100 vectors and 541 parameters otherwise overfits
+    #: (0: trainlm, the paper).
+    weight_decay: float = 0.1
+
+
+@dataclass
+class DistanceConfig:
+    """Egocentric distance learner (§3.5–3.5.2, eqs. 9–15): queue memory, sensitive-position
+    weighting, MLP r → hidden sigmoid → 1, trained by Levenberg–Marquardt."""
+
+    _target_: str = "parallax.distance.DistanceLearner"
+    #: Filled by the trainer: the lateral list L in metres (curriculum.lateral_positions).
+    lateral_positions: list[float] = MISSING
+    #: c, the queue memory's length (eq. 9; §4.2 uses 300).
+    queue_size: int = 300
+    #: Hidden sigmoid units (eqs. 13–14; §3.5.2 uses 30).
+    hidden: int = 30
+    #: Weigh the sensitive positions' inputs (eqs. 10–12); false: the plain inputs.
+    weighting: bool = True
+    #: y of eq. (12), w_k = 1/((1 + l_r − l_k)·y) with lengths in cm; the paper gives no value.
+    y: float = 1.0
+    sensitivity: SensitivityConfig = field(default_factory=SensitivityConfig)
+    #: LM epochs each time a new s arrives (warm start); the paper trains "every iteration".
+    epochs_per_call: int = 10
+    #: LM epochs of the first fit, when the queue has just filled.
+    initial_epochs: int = 100
+    lm: LevenbergMarquardtConfig = field(default_factory=LevenbergMarquardtConfig)
+    #: Where the targets come from (parallax.distance.targets.TARGET_SOURCES): ground_truth, the
+    #: supervisor's distances (§3.5).
+    targets: str = "ground_truth"
+    #: global: one mapminmax over all of S, as trainlm does | per_input: each position scaled on
+    #: its own (which would cancel the weighting).
+    input_scaling: str = "global"
+    #: Filled by the trainer: the network's initialisation seed.
+    seed: int = MISSING
+
+
+# --- the lateral list (curriculum/) ----------------------------------------------------------
+@dataclass
+class CurriculumConfig:
+    """The lateral list L (§3.2, Fig. 3) and, beyond the paper, a staged widening of it."""
+
+    #: Reported in summaries.
+    name: str = "multi_5_20"
+    #: L in metres, strictly increasing (§4.2.1: single positions 5–20 cm, or 5–10 / 5–20 cm in
+    #: 1 cm steps).
+    lateral_positions: list[float] = field(default_factory=lambda: list(LATERAL_5_20_M))
+    #: Beyond the paper: lists the trials move through, each a subset of L, the last equal to L;
+    #: the next one starts once every position of the current one has an eye-movement MAE below
+    #: ``advance_below_deg`` over at least ``min_trials`` trials. null: L from the start.
+    stages: list[list[float]] | None = None
+    advance_below_deg: float = 0.25
+    min_trials: int = 200
+
+
+# --- the robustness test (perturbation/) -----------------------------------------------------
+@dataclass
+class PerturbationConfig:
+    """The robustness test of §5: the left camera rotated and its images blurred while training
+    goes on."""
+
+    #: Rotation of the left camera in degrees (§5: 15).
+    camera_rotation_deg: float = 0.0
+    #: optical | horizontal | vertical, or a 3-vector in the camera frame.
+    rotation_axis: Any = "optical"
+    #: σ of the Gaussian blur in pixels (§5: 2).
+    blur_sigma: float = 0.0
+    #: Fraction of train.presentations after which the perturbation is switched on; null: never.
+    start_fraction: float | None = None
+
+
+# --- the run (top level) ---------------------------------------------------------------------
+@dataclass
+class TrainConfig:
+    #: Stimulus presentations per robot; one presentation is r·t_h iterations (Fig. 3).
+    presentations: int = 3000
+    #: Presentations between checkpoints (one is also written at the end).
+    checkpoint_every: int = 25
+    #: Presentations between TensorBoard images (dictionary atoms, left eye beside I0).
+    image_every: int = 50
+    #: Torch intra-op threads (0: torch's default); these matrices are small, and one thread
+    #: does not wait for a second one on a shared CPU.
+    threads: int = 1
+    #: Beyond the paper: with env.initial_pan_jitter_deg > 0, only the first this many
+    #: presentations start their trials from a jittered pan, so that the last trials (Tables
+    #: 2–3) are measured from pan 0 as in the paper. null: every presentation.
+    start_jitter_presentations: int | None = None
+    #: How a trial's pan becomes its component of s: last, its last pan (the paper's q_p, eq. 16)
+    #: | best_reward (beyond the paper), the pan whose image the coder encoded best in that
+    #: trial, which a runaway at the trial's end does not spoil.
+    distance_readout: str = "best_reward"
+
+
+@dataclass
+class MetricsConfig:
+    #: Trials in the sliding window of the eye-movement MAE, eq. (16).
+    mae_window: int = 1000
+    #: Trials in the "last 100 trials average (variance)" of Tables 2–3, and in the recent MAE
+    #: logged beside eq. (16)'s window.
+    summary_trials: int = 100
+    #: Online distance predictions (made before each new s is learnt) kept for the error per
+    #: range (Tables 4–5).
+    distance_window: int = 500
+
+
+@dataclass
+class Config:
+    """The whole run: parallax-train's composed configuration."""
+
+    env: EnvConfig = field(default_factory=EnvConfig)
+    coder: CoderConfig = field(default_factory=CoderConfig)
+    policy: PolicyConfig = field(default_factory=PolicyConfig)
+    distance: DistanceConfig = field(default_factory=DistanceConfig)
+    curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
+    perturbation: PerturbationConfig = field(default_factory=PerturbationConfig)
+    #: The run's seed; every component's seed is derived from it (parallax.experiment.seeds_for).
+    seed: int = 0
+    #: cpu | cuda | cuda:<n>: where the coder, policy and distance learner live (the world
+    #: renders through MuJoCo and hands its frames over in host memory).
+    device: str = "cpu"
+    #: Continue from the checkpoint in the run directory if there is one.
+    resume: bool = True
+    train: TrainConfig = field(default_factory=TrainConfig)
+    metrics: MetricsConfig = field(default_factory=MetricsConfig)
+
+
+#: Group name → schema node; conf/<group>/*.yaml extend ``<group>/schema``.
+GROUPS: dict[str, type] = {
+    "env": EnvConfig,
+    "coder": CoderConfig,
+    "policy": PolicyConfig,
+    "distance": DistanceConfig,
+    "curriculum": CurriculumConfig,
+    "perturbation": PerturbationConfig,
+}
+
+
+def register() -> None:
+    """Store the schema in Hydra's ConfigStore: the top level as ``schema`` (conf/config.yaml's
+    first default) and each group's node as ``<group>/schema``. Idempotent."""
+    from hydra.core.config_store import ConfigStore
+
+    store = ConfigStore.instance()
+    store.store(name=SCHEMA_NODE, node=Config)
+    for group, node in GROUPS.items():
+        store.store(group=group, name=SCHEMA_NODE, node=node)
