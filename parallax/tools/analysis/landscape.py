@@ -1,12 +1,13 @@
-"""`python -m parallax.tools.analysis.landscape RUN`: the reward of eq. (6) around the target pan α*, and the
-policy's mean pan step there, for a trained run (paper §3.3–3.4).
+"""`python -m parallax.tools.analysis.landscape RUN`: the reward of eq. (6) around the target pan
+α*, and the policy's mean pan step there, for a trained run (paper §3.3–3.4).
 
 The pursuit can only be as good as the reward it climbs: the eye settles where −(eC + eF) peaks.
 For a few (texture, distance) pairs at one lateral position this sweeps the pan from α* − span to
 α* + span with the run's frozen dictionaries and policy, and prints per offset the mean reward,
 the mean error of each scale and the policy's expected pan step E_π[a]; then the offset where
 each stimulus's reward peaks. A peak away from 0 means the learnt dictionaries favour a
-disparity other than zero (TUNING.md: a fast-adapting dictionary made it peak 0.35° short of α*).
+disparity other than zero (docs/improvements.md §1: a fast-adapting dictionary peaks short of
+α*).
 With ``policy.reward_change_gain`` > 0 the policy's reward-change entry is that of an eye arriving
 at each offset from the previous one by a step towards +, the way a trial sweeps from pan 0
 towards α* and, if it runs away, beyond. Nothing is learnt; the run directory is only read.
@@ -24,8 +25,8 @@ import torch
 
 from parallax import checkpoint
 from parallax.config import load_run_config
-from parallax.tools.analysis.best_match import views_around_target
 from parallax.experiment import Experiment
+from parallax.tools.analysis.best_match import views_around_target
 
 
 def sweep(
@@ -128,7 +129,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     if args.textures < 1 or args.span <= 0:
         print(
-            f"[landscape] --textures must be ≥ 1 and --span > 0, got {args.textures} and {args.span}",
+            "[landscape] --textures must be ≥ 1 and --span > 0, "
+            f"got {args.textures} and {args.span}",
             file=sys.stderr,
         )
         return 2
