@@ -122,7 +122,7 @@ class Experiment:
         return self.stage == len(self.stages) - 1
 
     def set_start_jitter(self, on: bool) -> None:
-        """Trials start from the jittered pan of ``env.initial_pan_jitter_deg…`` (on) or from 0."""
+        """Trials start from the jittered pan of ``env.initial_pan_jitter_deg`` (on) or from 0."""
         for env in self.envs:
             env.task.set_start_jitter(on)
 

@@ -133,6 +133,8 @@ def check_command_line(argv: Sequence[str]) -> str | None:
         return None
     overrides = list(args.overrides)
     if args.config_dir:
+        if any(o.lstrip("+~").startswith("hydra.searchpath") for o in overrides):
+            return None  # the search path is the user's: leave the composition to Hydra
         overrides.append(f"hydra.searchpath=[file://{args.config_dir}]")
     if args.config_name not in (None, CONFIG_NAME):
         return None

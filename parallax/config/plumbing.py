@@ -80,7 +80,13 @@ def closest_key(key: str) -> str | None:
     """The schema's setting nearest to a misspelt ``key`` (None if none is near)."""
     import difflib
 
-    close = difflib.get_close_matches(key, sorted(schema_keys()), n=1, cutoff=0.75)
+    known = sorted(schema_keys())
+    parent, _, leaf = key.rpartition(".")
+    siblings = {k.rpartition(".")[2]: k for k in known if k.rpartition(".")[0] == parent}
+    close = difflib.get_close_matches(leaf, sorted(siblings), n=1, cutoff=0.8)
+    if close:  # a misspelt name among its neighbours
+        return siblings[close[0]]
+    close = difflib.get_close_matches(key, known, n=1, cutoff=0.85)
     return close[0] if close else None
 
 

@@ -144,9 +144,10 @@ class PolicyConfig:
     actions: list[float] = field(default_factory=lambda: [-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2])
     #: α_v, the critic's step size (the paper gives no step sizes).
     critic_lr: float = 1.0
-    #: α_n, the advantage weights' step size (beyond the published pursuit setting 0.025).
+    #: α_n, the advantage weights' step size (the published pursuit setting: 0.025).
     advantage_lr: float = 0.1
-    #: α_p, the actor's step size (published 0.002: Θ → w/λ with time constant 1/(α_p·λ)).
+    #: α_p, the actor's step size (published: 0.002, with which Θ approaches w/λ with the time
+    #: constant 1/(α_p·λ) = 50 000 updates).
     actor_lr: float = 0.1
     #: ξ in δ = r − J + ξ·v·φ′ − v·φ (algorithm 3 has 1; 0.3 as in active-efficient-coding code).
     discount: float = 0.3
@@ -162,7 +163,8 @@ class PolicyConfig:
     #: paper): θ(t) − θ(I0, I0), the state relative to the same stimulus at zero disparity,
     #: scaled to norm ≤ 1; it removes texture-dependent offsets.
     feature_norm: str = "difference"
-    #: States (robots × steps) the running feature statistics remember; 0: all of them.
+    #: States (robots × steps) the running feature statistics of the normalisations beyond the
+    #: paper remember, so that they follow the drifting pooled activities; 0: all of them.
     zscore_horizon: int = 20000
     #: Beyond the paper: d_ref (m) > 0 adds the eye's own position as one more feature,
     #: ν = tan(pan)·d_ref/l clipped to [−1, 1], so one weight can say "turned too far" (0: off).
@@ -262,7 +264,9 @@ class CurriculumConfig:
     #: the next one starts once every position of the current one has an eye-movement MAE below
     #: ``advance_below_deg`` over at least ``min_trials`` trials. null: L from the start.
     stages: list[list[float]] | None = None
+    #: Eye-movement MAE (degrees, eq. 16) below which a stage is passed.
     advance_below_deg: float = 0.25
+    #: Trials each position of a stage needs before the stage can be passed.
     min_trials: int = 200
 
 

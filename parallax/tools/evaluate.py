@@ -10,7 +10,7 @@ beyond the paper, at distances between the grid points — and we measure:
   greedy policy.
 
 Trials start as the run's last training presentations did (pan 0 as in the paper, or a random
-pan with ``env.initial_pan_jitter_deg…``); ``--start-jitter on|off`` chooses.
+pan with ``env.initial_pan_jitter_deg``); ``--start-jitter on|off`` chooses.
 
 Writes `eval.json` and figures (`eval_mae_per_position.png`, `eval_error_vs_distance.png`,
 `mae_curves.png`) into the run directory (or --out).
@@ -313,7 +313,7 @@ def main(argv: list[str] | None = None) -> None:
         "--start-jitter",
         choices=["auto", "on", "off"],
         default="auto",
-        help="trials start from the run's env.initial_pan_jitter_deg… (on) or from pan 0 "
+        help="trials start from the run's env.initial_pan_jitter_deg (on) or from pan 0 "
         "as in the paper (off); auto: as at the end of training",
     )
     parser.add_argument(
