@@ -80,20 +80,22 @@ class NaturalActorCritic(nn.Module):
     def __init__(
         self,
         state_dim: int,
-        num_scales: int = 2,
+        num_scales: int,
+        *,
+        seed: int,
         actions: Sequence[float] = PAPER_ACTIONS_DEG,
         critic_lr: float = 1.0,
-        advantage_lr: float = 0.025,
-        actor_lr: float = 0.002,
+        advantage_lr: float = 0.1,
+        actor_lr: float = 0.1,
         discount: float = 0.3,
         reward_rate: float = 0.01,
-        weight_decay: float = 0.01,
+        weight_decay: float = 0.004,
         temperature: float = 1.0,
-        feature_norm: str = "none",
-        seed: int = 0,
-        zscore_horizon: int = 0,
-        eye_position_reference_m: float = 0.0,
-        reward_change_gain: float = 0.0,
+        feature_norm: str = "difference",
+        zscore_horizon: int = 20000,
+        eye_position_reference_m: float = 0.5,
+        reward_change_gain: float = 10.0,
+        actor_projection_radius: float | None = None,
     ) -> None:
         super().__init__()
         state_dim = _check_int("state_dim", state_dim, minimum=1)
@@ -127,6 +129,13 @@ class NaturalActorCritic(nn.Module):
                 f"actor_lr·weight_decay must be below 1, got {self.actor_lr}·{self.weight_decay}"
             )
         self.temperature = _check_positive("temperature", temperature)
+        # Algorithm 3's projection Γ keeps Θ in a compact set; here the ball of this radius
+        # (None: no projection, the weight decay λ alone keeps Θ bounded).
+        self.actor_projection_radius = (
+            None
+            if actor_projection_radius is None
+            else _check_positive("actor_projection_radius", actor_projection_radius)
+        )
         seed = _check_int("seed", seed, minimum=0)
 
         self.normalizer = FeatureNormalizer(
@@ -430,6 +439,10 @@ class NaturalActorCritic(nn.Module):
         self.actor.mul_(1 - self.actor_lr * self.weight_decay).add_(
             self.advantage, alpha=self.actor_lr
         )
+        if self.actor_projection_radius is not None:
+            norm = self.actor.norm()
+            if norm > self.actor_projection_radius:
+                self.actor.mul_(self.actor_projection_radius / norm)
         self.updates.add_(1)
         return td_error
 
