@@ -7,6 +7,8 @@
 #     bash launch/reproduce.sh paper        # the paper's algorithm as written (paper_*.yaml)
 #     bash launch/reproduce.sh recipe paper # both
 # Each run is `parallax-train experiment=<family>_<setup> seed=<n>`; nothing is added here.
+# Arguments with '=' are Hydra overrides for every run (e.g. train.presentations=20 for a
+# smoke test); the others name families.
 # Resumable: each family's runs live in a fixed folder ($SWEEP_ROOT/reproduce_<family>) and
 # continue from their checkpoints. Extra settings: launch/ablation_lib.sh (LAUNCHER, N_JOBS,
 # SEEDS, SWEEP_ROOT, REPORT_ROOT, PARALLAX_DRY_RUN), plus
@@ -15,7 +17,10 @@
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
-families=("$@")
+families=() overrides=()
+for arg in "$@"; do
+  if [[ "$arg" == *=* ]]; then overrides+=("$arg"); else families+=("$arg"); fi
+done
 if (( ${#families[@]} == 0 )); then
   families=(recipe)
 fi
@@ -33,7 +38,8 @@ for family in "${families[@]}"; do
     exit 2
   fi
   sweep="$(px_sweep_dir "reproduce_$family")"
-  px_sweep "$sweep" "experiment=$(IFS=,; echo "${names[*]}")" "seed=${SEEDS:-0,1,2}" || status=$?
+  px_sweep "$sweep" "experiment=$(IFS=,; echo "${names[*]}")" "seed=${SEEDS:-0,1,2}" \
+    "${overrides[@]}" || status=$?
 
   runs=()
   for name in "${names[@]}"; do

@@ -39,6 +39,32 @@ def test_every_setup_has_both_families_and_nothing_else():
     assert names == expected
 
 
+@pytest.mark.parametrize("name", sorted(p.stem for p in EXPERIMENTS.glob("*.yaml")))
+def test_every_experiment_composes_and_validates(name):
+    flat = _flat([f"experiment={name}"])
+    if name not in ("paper_algorithm", "quickstart"):
+        # every set-up of Tables 2–5 has §5's perturbation in the same run (Tables 3 and 5)
+        assert flat["perturbation.camera_rotation_deg"] == 15.0
+        assert flat["perturbation.blur_sigma"] == 2.0
+        assert flat["perturbation.start_fraction"] is not None
+
+
+@pytest.mark.parametrize("family", ["paper", "recipe"])
+def test_each_family_covers_tables_2_to_5(family):
+    from parallax.metrics import position_label
+    from parallax.tools.report import paper_results as paper
+
+    lists = {}
+    for setup in SETUPS:
+        flat = _flat([f"experiment={family}_{setup}"])
+        labels = tuple(position_label(l) for l in flat["curriculum.lateral_positions"])
+        lists[setup] = (labels, flat["distance.weighting"])
+    assert {labels for labels, _ in lists.values() if len(labels) == 1} == {
+        (p,) for p in paper.TABLE_POSITIONS_CM
+    }
+    assert set(paper.DISTANCE_ROWS.values()) <= set(lists.values())
+
+
 @pytest.mark.parametrize("setup", SETUPS)
 def test_the_paper_family_uses_nothing_beyond_the_paper(setup):
     flat = _flat([f"experiment=paper_{setup}"])
