@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from parallax.config import CONFIG_MODULE, CONFIG_NAME, compose, register_resolvers, validate
+from parallax.config import CONFIG_MODULE, CONFIG_NAME, compose, register_resolvers
 from parallax.trainer import Trainer
 
 REPO = Path(__file__).resolve().parents[1]
