@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
-from parallax.tools.bench import cli as bench
 from parallax.config import compose
+from parallax.tools.bench import cli as bench
 
 
 def test_coder_work_counts_the_paper_patches():
@@ -78,3 +79,16 @@ def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
         )
     )
     assert "[ceiling cpu]" in printed and "cores busy" in printed
+
+
+@pytest.mark.parametrize("name", ["cpu_2core.json", "gpu_h100.json"])
+def test_show_prints_a_committed_report_without_measuring(name, capsys):
+    """docs/performance.md quotes these files; --show prints their tables."""
+    path = Path(__file__).resolve().parents[2] / "docs" / "results" / "bench" / name
+    bench.main(["--show", str(path)])
+    printed = capsys.readouterr().out
+    assert "[end to end]" in printed and "[roofline cpu]" in printed
+    report = json.loads(path.read_text())
+    for dev, by_b in report["end_to_end"].items():
+        for b, case in by_b.items():
+            assert f"{dev} {b:<6} {case['steps_per_second']:>8.1f} steps/s" in printed

@@ -1,4 +1,5 @@
-"""python -m parallax.tools.analysis.landscape: the reward around α* of a trained run's frozen coder and policy."""
+"""python -m parallax.tools.analysis.landscape: the reward around α* of a trained run's frozen
+coder and policy."""
 
 from __future__ import annotations
 

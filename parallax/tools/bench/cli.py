@@ -15,7 +15,8 @@ Prints a readable table and writes JSON of
 
 Everything is measured in the same run, so ratios are comparable even on a shared machine;
 medians, never means. ``--threads`` sets torch's intra-op threads; the step also runs the world
-on the GL thread and the coder's second scale on a helper thread whatever it is (README, Speed).
+on the GL thread and the coder's second scale on a helper thread whatever it is
+(docs/performance.md).
 """
 
 from __future__ import annotations
@@ -73,10 +74,10 @@ def machine_limits(threads: int, device: str = "cpu") -> dict[str, float]:
 def cuda_components(repeats: int) -> dict[str, float]:
     """Median ms of the coder (encode + dictionary update, both scales), the policy's act +
     update and one LM epoch on the GPU, each followed by a device synchronisation."""
+    from parallax.policy.natural_actor_critic import NaturalActorCritic
     from parallax.tools.bench.coding import _coder, _frames
     from parallax.tools.bench.distance import EpochFromStart, _paper_sized_learner
-    from parallax.tools.bench.policy import NUM_SCALES, STATE_DIM, _pooled_activities
-    from parallax.policy.natural_actor_critic import NaturalActorCritic
+    from parallax.tools.bench.policy import NUM_SCALES, STATE_DIM, THETA_ALONE, _pooled_activities
 
     operations = {}
     for batch in (1, 16, 64):
@@ -88,7 +89,9 @@ def cuda_components(repeats: int) -> dict[str, float]:
             lambda coder=coder, current=current: coder(current), "cuda"
         )
     for batch in (1, 16, 64):
-        policy = NaturalActorCritic(STATE_DIM, NUM_SCALES, seed=0).to("cuda")
+        policy = NaturalActorCritic(
+            STATE_DIM, NUM_SCALES, seed=0, feature_norm="none", **THETA_ALONE
+        ).to("cuda")
         generator = torch.Generator().manual_seed(0)
         states = _pooled_activities(batch, generator).to("cuda")
         rewards = -torch.rand(batch, generator=generator).to("cuda")
@@ -355,26 +358,40 @@ def format_report(report: dict) -> str:
     )
     for dev, by_b in report["end_to_end"].items():
         for b, r in by_b.items():
+            trainer = (
+                f"   with the distance learner {r['trainer_steps_per_second']:.1f} steps/s"
+                if "trainer_steps_per_second" in r
+                else ""
+            )
             lines.append(
                 f"  {dev} {b:<6} {r['steps_per_second']:>8.1f} steps/s   "
-                f"lockstep {r['lockstep_ms']:.2f} ms   ×{r['step_over_coder_bound']:.1f} of the coder bound   "
-                f"with the distance learner {r['trainer_steps_per_second']:.1f} steps/s"
+                f"lockstep {r['lockstep_ms']:.2f} ms   "
+                f"×{r['step_over_coder_bound']:.1f} of the coder bound" + trainer
             )
     for dev, by_b in report["end_to_end"].items():
         for b, r in by_b.items():
             if "cpu_ms_per_robot_iteration" in r:
+                # a report may carry the core count with its ceiling only
+                cores = r.get("cores", report.get("ceiling", {}).get(dev, {}).get("cores", "?"))
                 lines.append(
-                    f"  {dev} {b:<6} range {r['steps_per_second_min']:.1f}–{r['steps_per_second_max']:.1f} steps/s;  "
+                    f"  {dev} {b:<6} range "
+                    f"{r['steps_per_second_min']:.1f}–{r['steps_per_second_max']:.1f} steps/s;  "
                     f"{r['cpu_ms_per_robot_iteration']:.2f} ms of CPU per robot-iteration, "
-                    f"{r['busy_cores']:.2f} cores busy → {r['steps_per_second_all_cores_busy']:.1f} "
-                    f"steps/s if all {r['cores']} were"
+                    f"{r['busy_cores']:.2f} cores busy → "
+                    f"{r['steps_per_second_all_cores_busy']:.1f} "
+                    f"steps/s if all {cores} were"
                 )
     for dev, rf in report["roofline"].items():
+        lockstep = (
+            f"; a lockstep of 16 robots {rf['coder_bound_ms_B16']:.3f} ms "
+            "(the Gram matrix and dictionary reads once)"
+            if "coder_bound_ms_B16" in rf
+            else ""
+        )
         lines.append(
-            f"[roofline {dev}] matmul {rf['matmul_gflops']:.1f} GFLOP/s, copy {rf['copy_gbps']:.1f} GB/s; "
-            f"coder per frame {rf['flops'] / 1e6:.1f} MFLOP, {rf['bytes'] / 1e6:.1f} MB "
-            f"→ bound {rf['coder_bound_ms_per_frame']:.4f} ms; a lockstep of 16 robots "
-            f"{rf['coder_bound_ms_B16']:.3f} ms (the Gram matrix and dictionary reads once)"
+            f"[roofline {dev}] matmul {rf['matmul_gflops']:.1f} GFLOP/s, "
+            f"copy {rf['copy_gbps']:.1f} GB/s; coder per frame {rf['flops'] / 1e6:.1f} MFLOP, "
+            f"{rf['bytes'] / 1e6:.1f} MB → bound {rf['coder_bound_ms_per_frame']:.4f} ms" + lockstep
         )
         if "coder_measured_over_bound" in rf:
             variants = [
@@ -399,7 +416,8 @@ def format_report(report: dict) -> str:
     if "ceiling" in report:
         top = report["ceiling"]["cpu"]
         lines.append(
-            f"[ceiling cpu] {top['cores']} cores; a left-eye frame costs {top['render_cpu_ms_per_frame']:.2f} ms "
+            f"[ceiling cpu] {top['cores']} cores; a left-eye frame costs "
+            f"{top['render_cpu_ms_per_frame']:.2f} ms "
             "of CPU to render alone; with the coder at its roofline bound and every core busy:"
         )
         for b, c in top.items():
@@ -423,7 +441,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--no-components", action="store_true", help="end to end and roofline only")
     parser.add_argument("--json", default=None, help="also write the report to this file")
+    parser.add_argument(
+        "--show",
+        default=None,
+        metavar="JSON",
+        help="print the tables of a report written by --json, measuring nothing",
+    )
     args = parser.parse_args(argv)
+    if args.show:
+        print(format_report(json.loads(Path(args.show).read_text())))
+        return
     if args.repeats < 1 or args.presentations < 1 or min(args.robots) < 1 or args.threads < 1:
         print(
             "parallax-bench: error: --repeats, --presentations, --robots and --threads must be ≥ 1",

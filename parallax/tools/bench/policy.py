@@ -18,6 +18,9 @@ from parallax.policy.natural_actor_critic import NaturalActorCritic
 
 STATE_DIM = 576
 NUM_SCALES = 2
+#: The states timed here are pooled activities alone, without the eye-position and reward-change
+#: entries of the recipe's state.
+THETA_ALONE = dict(eye_position_reference_m=0.0, reward_change_gain=0.0)
 WARMUP = 10
 
 
@@ -56,12 +59,14 @@ def run(repeats: int = 50) -> dict[str, float]:
     results: dict[str, float] = {}
     caller_threads = torch.get_num_threads()
     # The policy's tensors are tiny: timed on one intra-op thread, which is how the trainer
-    # should run it (on a busy 2-core machine a second thread made B = 16 100× slower).
+    # runs it (more threads only contend for the cores on a busy machine).
     torch.set_num_threads(1)
     try:
         for norm in FEATURE_NORMS:
             for batch in (1, 16):
-                policy = NaturalActorCritic(STATE_DIM, NUM_SCALES, feature_norm=norm, seed=0)
+                policy = NaturalActorCritic(
+                    STATE_DIM, NUM_SCALES, feature_norm=norm, seed=0, **THETA_ALONE
+                )
                 act_ms, update_ms, both_ms = _time_iteration(policy, batch, repeats)
                 results[f"act_update_B{batch}_{norm}_ms"] = both_ms
                 if norm == "zscore":
@@ -69,7 +74,9 @@ def run(repeats: int = 50) -> dict[str, float]:
                     results[f"update_B{batch}_ms"] = update_ms
                     results[f"act_update_B{batch}_ms"] = both_ms
         torch.set_num_threads(caller_threads)
-        policy = NaturalActorCritic(STATE_DIM, NUM_SCALES, feature_norm="zscore", seed=0)
+        policy = NaturalActorCritic(
+            STATE_DIM, NUM_SCALES, feature_norm="zscore", seed=0, **THETA_ALONE
+        )
         results["act_update_B16_caller_threads_ms"] = _time_iteration(policy, 16, repeats)[2]
         results["caller_threads"] = float(caller_threads)
     finally:
