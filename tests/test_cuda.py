@@ -1,4 +1,4 @@
-"""The GPU path (issue 7, `device=cuda`): the coder, policy and distance learner compute on a
+"""The GPU path (`device=cuda`): the coder, policy and distance learner compute on a
 GPU what they compute on the CPU. Skipped where torch sees no CUDA device (CI, the 2-core
 machines); run on a lent GPU with ``pytest tests/test_cuda.py``."""
 
@@ -12,8 +12,8 @@ import torch
 
 from parallax.coding import MultiScaleCoder
 from parallax.distance import DistanceLearner
-from parallax.tools.analysis.synthetic_pans import PAPER_LATERAL_POSITIONS_M, paper_regression
 from parallax.policy.natural_actor_critic import NaturalActorCritic
+from parallax.tools.analysis.synthetic_pans import PAPER_LATERAL_POSITIONS_M, paper_regression
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 

@@ -287,7 +287,7 @@ class NaturalActorCritic(nn.Module):
         zero step. The reward −(e_C + e_F) peaks at α* on both sides
         (``parallax.tools.analysis.landscape``), so g says on which side of the peak the eye is,
         which the pooled activities do not once the image pair no longer overlaps: past the
-        target the eye kept turning (runaways, docs/results/beyond_the_paper.md). One weight per
+        target the eye would keep turning (runaways, docs/improvements.md §6). One weight per
         action can then say "go back where the reward fell". It is a memory of one step (an
         efference copy of the last movement and the change it made), not knowledge of the
         distance. Relative to |r_{t−1}| so one gain serves untrained and trained coders alike,
