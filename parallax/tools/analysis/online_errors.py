@@ -1,0 +1,128 @@
+"""Where a run's online distance error jumps: the distance learner (paper §3.5, eqs. 9–15)
+replayed on a finished run's logged eye movements, presentation by presentation.
+
+The trainer reports the error of the last ``metrics.distance_window`` online predictions, each
+made before its s is learnt. One wild prediction moves that figure for hundreds of
+presentations. This tool replays the run's stream (as `parallax-replay` does, so the numbers are
+the run's own for the same settings) under each combination of overrides and prints the worst
+single predictions with the s they were made from, the fit's RMSE and μ just before, and the
+windowed total error at a few presentations:
+
+    python -m parallax.tools.analysis.online_errors RUN \\
+        distance.lm.weight_decay=0,0.1 train.distance_readout=last,best_reward
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+from hydra.utils import instantiate
+
+from parallax.config import READOUT_PANS, distance_readout, load_run_config
+from parallax.experiment import seeds_for
+from parallax.metrics import DistanceErrorTracker, learn_online
+from parallax.tools.replay import ReplayError, _read_stream
+
+
+def trace(run_dir: str | Path, overrides: Sequence[str] = ()) -> list[dict]:
+    """One row per online prediction: presentation, true and predicted distance (robot 0 of
+    each presentation), its relative error (%), the windowed total error after it, and the RMSE
+    (m) and μ of the fit that made it."""
+    run_dir = Path(run_dir)
+    cfg = load_run_config(run_dir)
+    cfg.merge_with_dotlist(list(overrides))
+    robots = int(cfg.env.robots)
+    learner = instantiate(
+        cfg.distance,
+        lateral_positions=[float(l) for l in cfg.curriculum.lateral_positions],
+        seed=seeds_for(int(cfg.seed), robots + 3)[robots + 2],
+    )
+    tracker = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
+    key = READOUT_PANS[distance_readout(cfg)]
+    rows, fit = [], {}
+    for record in _read_stream(run_dir):
+        if not record["learnt_distance"]:
+            continue
+        pans = np.atleast_2d(np.asarray(record[key], dtype=np.float64))
+        truth = float(record["distances"][0])
+        predicted = float(learner.predict(pans[:1]).reshape(-1)[0]) if learner.is_ready else None
+        stats = learn_online(learner, tracker, pans, record["distances"])
+        if predicted is not None:
+            rows.append(
+                {
+                    "presentation": int(record["presentation"]),
+                    "distance_m": truth,
+                    "predicted_m": predicted,
+                    "error_pct": abs(predicted - truth) / truth * 100.0,
+                    "window_total_pct": tracker.by_range()["total"],
+                    "fit_rmse_m": fit.get("rmse_m"),
+                    "fit_mu": fit.get("mu"),
+                    "s_deg": [round(float(q), 3) for q in pans[0]],
+                }
+            )
+        fit = stats or fit
+    return rows
+
+
+def _combinations(overrides: Sequence[str]) -> list[list[str]]:
+    choices = []
+    for item in overrides:
+        key, _, values = item.partition("=")
+        choices.append([f"{key}={v}" for v in values.split(",")])
+    return [list(c) for c in itertools.product(*choices)]
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("run", help="a finished parallax-train run directory")
+    parser.add_argument("overrides", nargs="*", help="key=v1,v2 … (every combination is traced)")
+    parser.add_argument("--worst", type=int, default=3, help="worst predictions to print")
+    parser.add_argument("--out", help="write every row of every combination to this JSON file")
+    args = parser.parse_args(argv)
+    if not (Path(args.run) / "metrics.jsonl").is_file():
+        print(f"online_errors: error: {args.run} has no metrics.jsonl", file=sys.stderr)
+        sys.exit(2)
+    torch.set_num_threads(1)
+    results = {}
+    for combo in _combinations(args.overrides):
+        label = " ".join(combo) or "(the run's settings)"
+        try:
+            rows = trace(args.run, combo)
+        except (ReplayError, ValueError, KeyError) as exc:
+            print(f"online_errors: error: {label}: {str(exc).splitlines()[0]}", file=sys.stderr)
+            sys.exit(2)
+        results[label] = rows
+        if not rows:
+            print(f"{label}: no online prediction (the queue never filled)")
+            continue
+        marks = sorted(
+            {
+                rows[0]["presentation"],
+                *[r["presentation"] for r in rows[:: len(rows) // 4 or 1]],
+                rows[-1]["presentation"],
+            }
+        )
+        window = {r["presentation"]: r["window_total_pct"] for r in rows}
+        print(f"{label}: final windowed error {rows[-1]['window_total_pct']:.2f} %")
+        print("  windowed total at " + ", ".join(f"{p}: {window[p]:.2f} %" for p in marks))
+        for r in sorted(rows, key=lambda r: -r["error_pct"])[: args.worst]:
+            rmse = "-" if r["fit_rmse_m"] is None else f"{r['fit_rmse_m']:.3f} m"
+            mu = "-" if r["fit_mu"] is None else f"{r['fit_mu']:.0e}"
+            print(
+                f"  presentation {r['presentation']}: d {r['distance_m']:.1f} m, predicted "
+                f"{r['predicted_m']:.2f} m ({r['error_pct']:.1f} %); fit before: RMSE {rmse}, "
+                f"μ {mu}; s = {r['s_deg']}"
+            )
+    if args.out:
+        Path(args.out).write_text(json.dumps(results, indent=1))
+
+
+if __name__ == "__main__":
+    main()
