@@ -93,7 +93,7 @@ def _parse_error(overrides: Sequence[str]) -> str | None:
     return None
 
 
-def _composed(overrides: list[str], check: bool) -> str | None:
+def composition_error(overrides: list[str], check: bool) -> str | None:
     """The error line for these overrides, or None: composed and, if ``check``, validated."""
     try:
         cfg = compose(overrides)
@@ -140,10 +140,10 @@ def check_command_line(argv: Sequence[str]) -> str | None:
         return None
     error = _parse_error(overrides)
     if error or not args.multirun:
-        return error or _composed(overrides, check=True)
+        return error or composition_error(overrides, check=True)
     jobs = _sweep_jobs(overrides)
     for job in jobs or []:
-        error = _composed(list(job), check=False)
+        error = composition_error(list(job), check=False)
         if error:
             return error
     return None

@@ -265,10 +265,12 @@ def run(
     robots: tuple[int, ...] = (1, 16),
     threads: int = 1,
     components: bool = True,
+    config_overrides: Sequence[str] = (),
 ) -> dict:
     torch.set_num_threads(threads)
     report: dict = {
         "threads": threads,
+        "overrides": list(config_overrides),
         "torch": torch.__version__,
         "cuda": torch.cuda.is_available(),
     }
@@ -288,7 +290,7 @@ def run(
             report["components_ms"]["cuda"] = cuda_components(repeats)
         torch.set_num_threads(threads)  # component benchmarks may change it
     # A short multi-position curriculum: 6 positions × 30 iterations per presentation.
-    overrides = ["curriculum=multi_5_10", f"train.threads={threads}"]
+    overrides = ["curriculum=multi_5_10", f"train.threads={threads}", *config_overrides]
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     report["end_to_end"] = {
         dev: end_to_end(robots, presentations, dev, overrides) for dev in devices
@@ -439,6 +441,12 @@ def main(argv: list[str] | None = None) -> None:
         "--robots", type=int, nargs="+", default=[1, 16], help="B values end to end"
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
+    parser.add_argument(
+        "overrides",
+        nargs="*",
+        help="Hydra overrides of the end-to-end cases (after curriculum=multi_5_10), e.g. "
+        "experiment=recipe_multi_5_20_weighted",
+    )
     parser.add_argument("--no-components", action="store_true", help="end to end and roofline only")
     parser.add_argument("--json", default=None, help="also write the report to this file")
     parser.add_argument(
@@ -457,8 +465,21 @@ def main(argv: list[str] | None = None) -> None:
             file=sys.stderr,
         )
         sys.exit(2)
+    from parallax.train import composition_error
+
+    error = composition_error(["curriculum=multi_5_10", *args.overrides], check=True)
+    if error:
+        print(f"parallax-bench: error: {error}", file=sys.stderr)
+        sys.exit(2)
     robots = tuple(dict.fromkeys(args.robots))  # each B once, in the order given
-    report = run(args.repeats, args.presentations, robots, args.threads, not args.no_components)
+    report = run(
+        args.repeats,
+        args.presentations,
+        robots,
+        args.threads,
+        not args.no_components,
+        args.overrides,
+    )
     print(format_report(report))
     text = json.dumps(report, indent=2)
     if args.json:
