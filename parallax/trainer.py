@@ -260,7 +260,8 @@ class Trainer:
                         and self.presentation == self.perturbation_start
                     ):
                         self.before_perturbation = self.metrics_summary()
-                        # The learnt state just before §5's perturbation, for parallax-eval --checkpoint.
+                        # The learnt state just before §5's perturbation, for
+                        # parallax-eval --checkpoint.
                         checkpoint.save_atomic(
                             self.state_dict(), self.run_dir / checkpoint.BEFORE_PERTURBATION_NAME
                         )
@@ -289,7 +290,8 @@ class Trainer:
                         print(
                             f"[parallax] presentation {self.presentation}/{total}  "
                             f"steps/s {sps:.0f}  MAE {record['mae']:.3f}° "
-                            f"(last {int(cfg.metrics.summary_trials)} trials {record['mae_recent']:.3f}°)  distance error "
+                            f"(last {int(cfg.metrics.summary_trials)} trials "
+                            f"{record['mae_recent']:.3f}°)  distance error "
                             + (f"{dist_total:.2f}%" if dist_total is not None else "-"),
                             flush=True,
                         )

@@ -50,8 +50,8 @@ def train_tiny_run(run_dir, extra_overrides=()):
 @pytest.fixture(autouse=True)
 def _one_torch_thread():
     """The suite's tensors are small: a second intra-op thread only adds synchronisation, and on
-    a busy shared 2-core machine two OpenMP workers waiting for each other made tests ten times
-    slower. The trainer does the same by default (train.threads=1)."""
+    a busy shared 2-core machine two OpenMP workers spend their time waiting for each other. The
+    trainer does the same by default (train.threads=1)."""
     previous = torch.get_num_threads()
     torch.set_num_threads(1)
     yield

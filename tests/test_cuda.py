@@ -66,7 +66,7 @@ def test_coder_on_the_gpu_matches_the_cpu() -> None:
 
 
 def test_policy_on_the_gpu_matches_the_cpu() -> None:
-    # the published step sizes and θ alone as the state, as this test was written for
+    # the published step sizes and θ alone as the state, the settings this test checks
     published = dict(
         advantage_lr=0.025,
         actor_lr=0.002,

@@ -12,7 +12,7 @@ Jacobian stops the epoch without a step, so NaN/inf never reach the parameters.
 The residuals come from a closure ``closure(forward, *batch) -> residuals`` where ``forward``
 calls the model with the candidate parameters: ``lambda forward, x, y: forward(x) - y``. With
 ``per_sample=True`` the rows of ``batch`` are independent samples and the Jacobian is built one
-sample at a time under ``vmap`` (~7× faster than a full ``jacrev`` for the distance network).
+sample at a time under ``vmap`` (cheaper than a full ``jacrev`` for the distance network).
 """
 
 from __future__ import annotations

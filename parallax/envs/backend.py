@@ -34,7 +34,8 @@ def gl_backend() -> str:
 
 
 def import_mujoco() -> ModuleType:
-    """``import mujoco``, turning a broken GL backend (it is loaded on import) into one clear error."""
+    """``import mujoco``, turning a broken GL backend (it is loaded on import) into one clear
+    error."""
     try:
         return importlib.import_module("mujoco")
     except (ImportError, OSError, AttributeError, RuntimeError) as error:

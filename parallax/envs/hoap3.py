@@ -65,7 +65,8 @@ def eye_fovy_deg(image_size: int, focal_px: float = FOCAL_LENGTH_PX) -> float:
 
 
 def model_xml(image_size: int, texture_size: int, max_distance_m: float) -> str:
-    """The MJCF of the world for an eye image of ``image_size`` px and panels up to ``max_distance_m``."""
+    """The MJCF of the world for an eye image of ``image_size`` px and panels up to
+    ``max_distance_m``."""
     background_x = EYE_FORWARD_M + max_distance_m + 3.0
     # Wide enough for ±25° of view beyond the panel; it sinks below the floor, which hides it there.
     background_half_width = background_x * math.tan(math.radians(40.0))
@@ -94,7 +95,8 @@ def _rotation_quat(axis: tuple[float, float, float], angle_deg: float) -> np.nda
 
 
 def camera_axis(rotation_axis: str | tuple[float, float, float]) -> tuple[float, float, float]:
-    """A perturbation rotation axis by name (optical, horizontal, vertical) or as a camera-frame vector."""
+    """A perturbation rotation axis by name (optical, horizontal, vertical) or as a camera-frame
+    vector."""
     if isinstance(rotation_axis, str):
         if rotation_axis not in ROTATION_AXES:
             raise ValueError(
@@ -179,7 +181,8 @@ class Physics(dm_mujoco.Physics):
 
     # --- the world is kinematic --------------------------------------------------------------
     def step(self, nstep: int = 1) -> None:
-        """Advance time only: the body is placed and the eye turned exactly (paper §3: perfect control)."""
+        """Advance time only: the body is placed and the eye turned exactly (paper §3: perfect
+        control)."""
         self.data.time += nstep * self.model.opt.timestep
         self.forward()
 
@@ -221,7 +224,8 @@ class Physics(dm_mujoco.Physics):
         return self._texture_index
 
     def set_stimulus(self, texture_index: int, distance_m: float) -> None:
-        """Show texture ``texture_index`` on the panel, ``distance_m`` metres ahead of the eye at l0."""
+        """Show texture ``texture_index`` on the panel, ``distance_m`` metres ahead of the eye at
+        l0."""
         count = self._stimuli.count
         if (
             isinstance(texture_index, bool)
@@ -229,7 +233,8 @@ class Physics(dm_mujoco.Physics):
             or not 0 <= texture_index < count
         ):
             raise ValueError(
-                f"texture index {texture_index!r} is out of range: {count} textures (0..{count - 1})"
+                f"texture index {texture_index!r} is out of range: "
+                f"{count} textures (0..{count - 1})"
             )
         distance_m = check_distance(distance_m)
         if int(texture_index) != self._texture_index:
@@ -293,7 +298,8 @@ class Physics(dm_mujoco.Physics):
         return math.atan2(in_camera[0], -in_camera[2])
 
     def project_to_left_eye(self, point: np.ndarray) -> np.ndarray:
-        """Pixel (column, row) of a world point in the left-eye image (pixel centres at integers)."""
+        """Pixel (column, row) of a world point in the left-eye image (pixel centres at
+        integers)."""
         offset = np.asarray(point, dtype=np.float64) - self.data.cam_xpos[self._left_eye]
         x, y, z = self.data.cam_xmat[self._left_eye].reshape(3, 3).T @ offset
         centre = (self._image_size - 1) / 2.0

@@ -1,10 +1,10 @@
 """Headless OpenGL rendering of the robot's eye (paper §3.2: the left-eye image I(t)).
 
 A small renderer that keeps one MuJoCo render context and one scene per physics, in one OpenGL
-context shared by all environments, so a 256×256 eye frame costs about a millisecond on a CPU
-(Mesa) — dm_control's generic ``physics.render`` re-creates its camera and scene on every call
-and opens one OpenGL context per physics. It also re-uploads a texture after its pixels changed,
-which is how the stimulus is swapped without recompiling.
+context shared by all environments, so rendering an eye frame re-creates nothing, which keeps it
+cheap on a CPU (Mesa); dm_control's generic ``physics.render`` re-creates its camera and scene on
+every call and opens one OpenGL context per physics. It also re-uploads a texture after its
+pixels changed, which is how the stimulus is swapped without recompiling.
 
 Every OpenGL call of the process runs on one thread, :func:`gl_thread` (an OpenGL context is
 current in one thread at a time). Renderers may be used from any thread: their calls are handed
@@ -122,9 +122,8 @@ def _close_everything() -> None:
 def shared_gl_context() -> Any:
     """The OpenGL context every renderer shares, opened on the GL thread (call it there).
 
-    One context rather than one per environment: switching contexts costs more than a frame on
-    Mesa (16 environments rendering in turn: 4 ms a frame with a context each, 1.5 ms with one),
-    and each new context compiles its shaders again (≈ 0.25 s).
+    One context rather than one per environment: on Mesa, switching contexts costs more than
+    rendering a frame, and each new context compiles its shaders again.
     """
     global _shared_context
     if not gl_thread().is_current:

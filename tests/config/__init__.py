@@ -1,0 +1,1 @@
+"""Tests of the configuration: the schema, the shipped conf/ files, validation, run names."""

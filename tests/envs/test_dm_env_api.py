@@ -1,4 +1,5 @@
-"""The world's outside: dm_env conformance, the shipped config, headless backends, picture, benchmark."""
+"""The world's outside: dm_env conformance, the shipped config, headless backends, picture,
+benchmark."""
 
 from __future__ import annotations
 

@@ -36,7 +36,8 @@ def eye_env():
 
 
 def marker_centre(physics: hoap3.Physics, radius_px: float = 9.0) -> np.ndarray:
-    """Sub-pixel (column, row) of the disc drawn at the panel centre, found in the rendered image."""
+    """Sub-pixel (column, row) of the disc drawn at the panel centre, found in the rendered
+    image."""
     marker = physics.model.name2id("fixation_marker", "geom")
     physics.model.geom_size[marker, 0] = radius_px * physics.distance() / FOCAL_LENGTH_PX
     with_marker = physics.render_left_eye(show_marker=True).astype(int)
@@ -416,7 +417,7 @@ def test_bad_runtime_values_are_refused():
     env.close()
 
 
-# --- several environments in one process -----------------------------------------------------------
+# --- several environments in one process ------------------------------------------------------
 def test_sixteen_environments_render_in_one_process():
     envs = [small_env(seed=seed) for seed in range(16)]
     firsts = [env.reset().observation for env in envs]

@@ -2,7 +2,6 @@
 Θ, in place of our weight decay λ)."""
 
 import pytest
-import torch
 
 from parallax.policy import NaturalActorCritic
 from parallax.tools.analysis.synthetic_pursuit import (

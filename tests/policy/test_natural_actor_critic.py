@@ -21,7 +21,7 @@ from parallax.tools.analysis.synthetic_pursuit import (
 )
 
 SMALL_DIM = 12
-#: The settings these tests were written for: the published pursuit step sizes and θ alone as the
+#: The settings these tests check: the published pursuit step sizes and θ alone as the
 #: state (the constructor's defaults are the recipe's, parallax/config/schema.py).
 PUBLISHED = dict(
     advantage_lr=0.025,
