@@ -356,7 +356,8 @@ def load(
     rotation_axis: str | Sequence[float] = "optical",
     blur_sigma: float = 0.0,
     max_pan_increment_deg: float = max(ACTION_SET_DEG),
-    initial_pan_jitter_deg: float = 0.0,
+    *,
+    initial_pan_jitter_deg: float,
 ) -> PursuitEnvironment:
     """The HOAP-3 lateral-pursuit world as a dm_control environment (see the module docstring).
 

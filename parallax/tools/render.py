@@ -65,6 +65,7 @@ def render_pictures(
         trial_length=2,
         distances=[distance_m],
         image_size=image_size,
+        initial_pan_jitter_deg=0.0,  # the eye starts at pan 0
     )
     try:
         if texture_index is not None:

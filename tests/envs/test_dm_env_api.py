@@ -30,6 +30,7 @@ class ConformanceTest(test_utils.EnvironmentTestMixin, absltest.TestCase):
     def make_object_under_test(self):
         return parallax.envs.load(
             seed=1,
+            initial_pan_jitter_deg=0.0,
             lateral_positions=[0.05, 0.1],
             trial_length=3,
             image_size=32,
@@ -45,7 +46,13 @@ class ConformanceTest(test_utils.EnvironmentTestMixin, absltest.TestCase):
 def test_environment_is_a_dm_control_environment():
     from dm_control.rl import control
 
-    env = parallax.envs.load(seed=0, lateral_positions=[0.05], image_size=32, stimuli={"count": 2})
+    env = parallax.envs.load(
+        seed=0,
+        lateral_positions=[0.05],
+        image_size=32,
+        stimuli={"count": 2},
+        initial_pan_jitter_deg=0,
+    )
     assert isinstance(env, control.Environment) and isinstance(env, dm_env.Environment)
     spec = env.action_spec()
     assert spec.shape == () and spec.minimum == -0.2 and spec.maximum == 0.2
@@ -100,7 +107,8 @@ def _run_python(code: str, gl: str | None) -> subprocess.CompletedProcess:
 
 RENDER_ONE = """
 import os, parallax.envs
-env = parallax.envs.load(seed=0, lateral_positions=[0.05], image_size=16, stimuli={"count": 1})
+env = parallax.envs.load(seed=0, lateral_positions=[0.05], image_size=16, stimuli={"count": 1},
+                         initial_pan_jitter_deg=0)
 print(os.environ["MUJOCO_GL"], env.reset().observation["image"].shape)
 """
 

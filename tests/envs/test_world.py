@@ -18,7 +18,11 @@ SMALL_STIMULI = {"count": 6}
 
 def small_env(seed=0, **options):
     settings = dict(
-        lateral_positions=[0.05, 0.1], trial_length=3, image_size=48, stimuli=SMALL_STIMULI
+        lateral_positions=[0.05, 0.1],
+        trial_length=3,
+        image_size=48,
+        stimuli=SMALL_STIMULI,
+        initial_pan_jitter_deg=0.0,
     )
     settings.update(options)
     return parallax.envs.load(seed=seed, **settings)
@@ -28,7 +32,11 @@ def small_env(seed=0, **options):
 def eye_env():
     """A full-size (256 px) world for measurements in the image."""
     env = parallax.envs.load(
-        seed=0, lateral_positions=[0.05], image_size=256, stimuli=SMALL_STIMULI
+        seed=0,
+        lateral_positions=[0.05],
+        image_size=256,
+        stimuli=SMALL_STIMULI,
+        initial_pan_jitter_deg=0.0,
     )
     env.reset()
     yield env
@@ -439,7 +447,10 @@ def test_sixteen_environments_render_in_one_process():
 def test_a_paper_sized_presentation_with_sixteen_full_size_robots():
     """L = 5…20 cm, t_h = 30, 256 px: 480 observations per robot, q_p at every 30th."""
     lateral = [round(0.05 + 0.01 * k, 2) for k in range(16)]
-    envs = [parallax.envs.load(seed=seed, lateral_positions=lateral) for seed in range(16)]
+    envs = [
+        parallax.envs.load(seed=seed, lateral_positions=lateral, initial_pan_jitter_deg=0.0)
+        for seed in range(16)
+    ]
     steps = [env.reset() for env in envs]
     count, finals = 1, []
     while not steps[0].last():

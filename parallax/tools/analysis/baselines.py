@@ -26,7 +26,9 @@ from parallax.tools.evaluate import grid
 
 def target_pans(lateral_m: float, distances: list[float]) -> np.ndarray:
     """α* in degrees at lateral position ``lateral_m`` for each distance (metres)."""
-    env = parallax.envs.load(seed=0, lateral_positions=[lateral_m], trial_length=2)
+    env = parallax.envs.load(
+        seed=0, lateral_positions=[lateral_m], trial_length=2, initial_pan_jitter_deg=0.0
+    )
     try:
         pans = []
         for d in distances:

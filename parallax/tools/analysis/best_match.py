@@ -66,7 +66,9 @@ def best_match_offsets(
 ) -> dict[str, list[float]]:
     """scale → per texture, argmin over pans of MSE(window(I(pan)), window(I0)) minus α*, in
     degrees."""
-    env = parallax.envs.load(seed=seed, lateral_positions=[lateral], trial_length=30)
+    env = parallax.envs.load(
+        seed=seed, lateral_positions=[lateral], trial_length=30, initial_pan_jitter_deg=0.0
+    )
     specs = scale_specs()
     offsets: dict[str, list[float]] = {name: [] for name in specs}
     steps = np.arange(-span_deg, span_deg + step_deg / 2, step_deg)

@@ -28,7 +28,13 @@ def _target_table(pairs: set[tuple[float, float]]) -> dict[tuple[float, float], 
     """α* (degrees) for each (distance m, lateral m), from the world's kinematics, unperturbed."""
     import parallax.envs
 
-    env = parallax.envs.load(seed=0, lateral_positions=[0.05], trial_length=2, image_size=32)
+    env = parallax.envs.load(
+        seed=0,
+        lateral_positions=[0.05],
+        trial_length=2,
+        image_size=32,
+        initial_pan_jitter_deg=0.0,
+    )
     try:
         physics = env.physics
         table = {}

@@ -165,7 +165,13 @@ def render_cpu_ms_per_frame(frames: int = 200) -> float:
     No roofline exists for the renderer, so this measured cost is the step's floor for it."""
     import parallax.envs
 
-    env = parallax.envs.load(seed=0, lateral_positions=[0.05, 0.1], trial_length=30, image_size=256)
+    env = parallax.envs.load(
+        seed=0,
+        lateral_positions=[0.05, 0.1],
+        trial_length=30,
+        image_size=256,
+        initial_pan_jitter_deg=0.0,
+    )
     try:
         env.reset()
         for _ in range(20):

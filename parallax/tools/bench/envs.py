@@ -26,7 +26,12 @@ def run(repeats: int = 50, image_size: int = 256) -> dict[str, float]:
     """Median milliseconds per operation (and MB per extra environment)."""
     import parallax.envs
 
-    options = dict(lateral_positions=[0.05, 0.1, 0.15, 0.2], trial_length=30, image_size=image_size)
+    options = dict(
+        lateral_positions=[0.05, 0.1, 0.15, 0.2],
+        trial_length=30,
+        image_size=image_size,
+        initial_pan_jitter_deg=0.0,
+    )
     env = parallax.envs.load(seed=0, **options)
     env.reset()
     physics = env.physics
