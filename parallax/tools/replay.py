@@ -347,8 +347,10 @@ def main(argv: list[str] | None = None) -> None:
                     + "; ".join(f"{what} {text}" for what, text in spread.items()),
                     flush=True,
                 )
-    except (ReplayError, FileNotFoundError) as exc:
-        sys.exit(f"parallax-replay: {exc}")
+    except (ReplayError, FileNotFoundError, ValueError) as exc:
+        # bad input (a folder that is no run, an override it cannot take, a stale run config)
+        print(f"parallax-replay: error: {str(exc).splitlines()[0]}", file=sys.stderr)
+        sys.exit(2)
 
 
 def replay_totals(result: dict) -> dict[str, float]:

@@ -134,9 +134,27 @@ def test_run_directories_named_with_equals_signs_are_paths(perturbed_run, tmp_pa
     assert len(list((tmp_path / "out").rglob("summary.json"))) == 1
 
 
-def test_a_folder_without_runs_is_refused(tmp_path):
-    with pytest.raises(SystemExit, match="holds no finished run"):
+def test_a_folder_without_runs_is_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
         main([str(tmp_path), "--out", str(tmp_path / "out")])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds no finished run" in err[0]
+
+
+def test_a_run_config_that_does_not_match_the_schema_is_refused(perturbed_run, tmp_path, capsys):
+    stale = tmp_path / "stale"
+    stale.mkdir()
+    for name in ("config.yaml", "summary.json", "metrics.jsonl"):
+        (stale / name).write_bytes((perturbed_run / name).read_bytes())
+    with (stale / "config.yaml").open("a") as config:
+        config.write("retired_setting: 1\n")
+    with pytest.raises(SystemExit) as exit_info:
+        main([str(stale), "--out", str(tmp_path / "out")])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "retired_setting" in err[0]
+    assert not (tmp_path / "out").exists()
 
 
 def test_replayed_learners_are_scored_on_the_evals_eye_movements(perturbed_run, tmp_path):
