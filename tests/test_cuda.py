@@ -66,16 +66,8 @@ def test_coder_on_the_gpu_matches_the_cpu() -> None:
 
 
 def test_policy_on_the_gpu_matches_the_cpu() -> None:
-    # the published step sizes and θ alone as the state, the settings this test checks
-    published = dict(
-        advantage_lr=0.025,
-        actor_lr=0.002,
-        weight_decay=0.01,
-        feature_norm="none",
-        zscore_horizon=0,
-        eye_position_reference_m=0.0,
-        reward_change_gain=0.0,
-    )
+    from parallax.tools.analysis.synthetic_pursuit import PUBLISHED as published
+
     policies = {
         device: NaturalActorCritic(576, 2, seed=3, **published).to(device)
         for device in ("cpu", "cuda")

@@ -13,7 +13,9 @@ from omegaconf import OmegaConf
 
 from parallax.config import PolicyConfig
 from parallax.policy import FEATURE_NORMS, NaturalActorCritic
+# PUBLISHED: the published pursuit step sizes with θ alone as the state, what these tests check
 from parallax.tools.analysis.synthetic_pursuit import (
+    PUBLISHED,
     PursuitTaskConfig,
     SyntheticPursuit,
     correcting_fraction,
@@ -21,17 +23,6 @@ from parallax.tools.analysis.synthetic_pursuit import (
 )
 
 SMALL_DIM = 12
-#: The settings these tests check: the published pursuit step sizes and θ alone as the
-#: state (the constructor's defaults are the recipe's, parallax/config/schema.py).
-PUBLISHED = dict(
-    advantage_lr=0.025,
-    actor_lr=0.002,
-    weight_decay=0.01,
-    feature_norm="none",
-    zscore_horizon=0,
-    eye_position_reference_m=0.0,
-    reward_change_gain=0.0,
-)
 
 
 def _policy(**overrides: object) -> NaturalActorCritic:
