@@ -13,7 +13,6 @@ from omegaconf import OmegaConf
 
 from parallax.config import PolicyConfig
 from parallax.policy import FEATURE_NORMS, NaturalActorCritic
-# PUBLISHED: the published pursuit step sizes with θ alone as the state, what these tests check
 from parallax.tools.analysis.synthetic_pursuit import (
     PUBLISHED,
     PursuitTaskConfig,
@@ -22,6 +21,8 @@ from parallax.tools.analysis.synthetic_pursuit import (
     train_on_synthetic_pursuit,
 )
 
+# PUBLISHED (imported): the published pursuit step sizes with θ alone as the state, the settings
+# these tests check
 SMALL_DIM = 12
 
 
