@@ -118,3 +118,27 @@ def test_the_committed_models_are_reproduced_by_one_experiment_name(run):
         if key not in RESULT_NEUTRAL_KEYS and saved.get(key) != current.get(key)
     }
     assert differ == {}
+
+
+@pytest.mark.parametrize("name", ["paper_multi_5_20_weighted", "recipe_multi_5_20_weighted"])
+def test_each_family_trains_and_resumes_exactly(name, tmp_path, tiny_overrides):
+    """Shrunk like the other tests' runs, each family trains; stopped and resumed, it gives the
+    numbers of an uninterrupted run, across §5's perturbation."""
+    from parallax.trainer import Trainer
+
+    overrides = [f"experiment={name}", *tiny_overrides, "env.stimuli.count=6"]
+    overrides = [o for o in overrides if not o.startswith("curriculum.lateral_positions")]
+    # 0.2 of 4 and of 6 presentations both round to 1: the stop changes no setting
+    overrides += ["curriculum.lateral_positions=[0.05,0.1]", "perturbation.start_fraction=0.2"]
+
+    def train(run_dir, presentations):
+        trainer = Trainer(compose(overrides + [f"train.presentations={presentations}"]), run_dir)
+        try:
+            trainer.fit()
+        finally:
+            trainer.exp.close()
+        return (run_dir / "metrics.jsonl").read_text()
+
+    whole = train(tmp_path / "whole", 6)
+    train(tmp_path / "parts", 4)
+    assert train(tmp_path / "parts", 6) == whole
