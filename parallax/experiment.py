@@ -58,6 +58,17 @@ def seeds_for(seed: int, count: int) -> list[int]:
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(int(seed)).spawn(count)]
 
 
+def distance_learner(cfg: DictConfig):
+    """The run's distance learner (paper §3.5), fresh, with the seed its run gives it: the
+    seeds are one per robot's world, then the coder's, the policy's and the learner's."""
+    robots = int(cfg.env.robots)
+    return instantiate(
+        cfg.distance,
+        lateral_positions=[float(l) for l in cfg.curriculum.lateral_positions],
+        seed=seeds_for(cfg.seed, robots + 3)[robots + 2],
+    )
+
+
 class Experiment:
     """The world(s), coder, policy and distance learner of one run, built from a config."""
 
@@ -104,9 +115,7 @@ class Experiment:
             num_scales=len(cfg.coder.scales),
             seed=seeds[self.robots + 1],
         ).to(self.device)
-        self.distance = instantiate(
-            cfg.distance, lateral_positions=self.lateral_positions, seed=seeds[self.robots + 2]
-        )
+        self.distance = distance_learner(cfg)
         if hasattr(self.distance, "to"):  # DistanceLearner.to, or an nn.Module
             self.distance.to(self.device)
         self.stage = 0

@@ -16,16 +16,13 @@ before the trainer writes anything into its directory.
 from __future__ import annotations
 
 import logging
-import re
 import sys
 from collections.abc import Sequence
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
-from hydra.errors import HydraException
 from hydra.types import RunMode
 from omegaconf import DictConfig
-from omegaconf.errors import OmegaConfBaseException
 
 from parallax.config import (
     CONFIG_MODULE,
@@ -33,13 +30,11 @@ from parallax.config import (
     RUN_CONFIG_NAME,
     ConfigError,
     changed_settings,
-    compose,
     load_run_config,
     register_resolvers,
     validate,
 )
-from parallax.config.plumbing import closest_key
-from parallax.config.schema import SCHEMA_NODE
+from parallax.config.overrides import composition_error, parse_error
 
 #: Hydra flags after which no run starts, or whose config source `compose` cannot see: Hydra
 #: handles these command lines on its own.
@@ -49,61 +44,6 @@ _HYDRA_ONLY = ("help", "hydra_help", "cfg", "info", "shell_completion", "config_
 def _fail(message: str) -> None:
     print(f"parallax-train: error: {message}", file=sys.stderr)
     sys.exit(2)
-
-
-def _first_line(exc: BaseException | None) -> str:
-    lines = [line.strip() for line in str(exc).strip().splitlines() if line.strip()]
-    return lines[0] if lines else type(exc).__name__
-
-
-def explain(exc: BaseException, overrides: Sequence[str]) -> str:
-    """One line for a Hydra composition error: the override it is about and what is wrong."""
-    text, first = str(exc), _first_line(exc)
-    merging = re.match(r"Error merging override (.+)", first)
-    if merging:
-        return f"{merging.group(1)}: {_first_line(exc.__cause__)}"
-    unknown = re.match(r"Could not override '(.+)'\.", first)
-    if unknown:
-        key = unknown.group(1)
-        given = next((o for o in overrides if o.split("=", 1)[0] == key), key)
-        close = closest_key(key)
-        return f"{given}: no such setting" + (f"; did you mean {close}?" if close else "")
-    missing = re.match(r"In '.+': Could not find '(.+)/([^/]+)'", first)
-    if missing:
-        group, option = missing.groups()
-        listed = text.split("Available options in", 1)[-1].split("Config search path", 1)[0]
-        options = [o.strip() for o in listed.splitlines()[1:] if o.strip()]
-        options = [o for o in options if o != SCHEMA_NODE] or ["(none)"]
-        return f"{group}={option}: no such choice; {group} has {', '.join(options)}"
-    if first.startswith("Ambiguous value for argument"):
-        given = first[len("Ambiguous value for argument ") :].strip("'")
-        return f"{given}: add -m to sweep over its values, or write a list as key=[a,b]"
-    return first
-
-
-def _parse_error(overrides: Sequence[str]) -> str | None:
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    parser = OverridesParser.create()
-    for override in overrides:
-        try:
-            parser.parse_override(override)
-        except HydraException as exc:
-            return f"{override}: cannot be parsed ({_first_line(exc)})"
-    return None
-
-
-def composition_error(overrides: list[str], check: bool) -> str | None:
-    """The error line for these overrides, or None: composed and, if ``check``, validated."""
-    try:
-        cfg = compose(overrides)
-        if check:
-            validate(cfg)
-    except ConfigError as exc:
-        return str(exc)
-    except (HydraException, OmegaConfBaseException) as exc:
-        return explain(exc, overrides)
-    return None
 
 
 def _sweep_jobs(overrides: list[str]) -> list[list[str]] | None:
@@ -138,7 +78,7 @@ def check_command_line(argv: Sequence[str]) -> str | None:
         overrides.append(f"hydra.searchpath=[file://{args.config_dir}]")
     if args.config_name not in (None, CONFIG_NAME):
         return None
-    error = _parse_error(overrides)
+    error = parse_error(overrides)
     if error or not args.multirun:
         return error or composition_error(overrides, check=True)
     jobs = _sweep_jobs(overrides)

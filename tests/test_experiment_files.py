@@ -82,7 +82,7 @@ def test_the_paper_family_uses_nothing_beyond_the_paper(setup):
 
 
 @pytest.mark.parametrize("setup", SETUPS)
-def test_the_two_families_differ_only_in_the_algorithm_and_its_budget(setup):
+def test_the_two_families_share_each_setups_lateral_list_weighting_and_perturbation(setup):
     paper, recipe = _flat([f"experiment=paper_{setup}"]), _flat([f"experiment=recipe_{setup}"])
     same = ("curriculum.lateral_positions", "distance.weighting", "perturbation.blur_sigma")
     for key in same:

@@ -31,7 +31,6 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import torch
-from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from parallax import checkpoint
@@ -44,7 +43,7 @@ from parallax.config import (
     load_run_config,
     run_name,
 )
-from parallax.experiment import seeds_for
+from parallax.experiment import distance_learner
 from parallax.metrics import DistanceErrorTracker, learn_online
 from parallax.tools.report.runs import (
     METRICS_NAME,
@@ -80,7 +79,7 @@ def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
     return [list(combo) for combo in itertools.product(*axes)] if axes else [[]]
 
 
-def _read_stream(run_dir: Path) -> list[dict]:
+def read_stream(run_dir: Path) -> list[dict]:
     """The run's metrics.jsonl records, which must carry the eye-movement vectors s."""
     records = read_metrics(run_dir)
     if records and "pans" not in records[0]:
@@ -114,18 +113,13 @@ def replay(
         ) from None
     summary = json.loads(summary_path.read_text())
     if int(cfg.train.threads) > 0:
-        # as in training and parallax-eval: two replays side by side, each with two intra-op
-        # threads on a 2-core machine, took minutes per run instead of seconds
+        # as in training and parallax-eval: replays side by side, each with several intra-op
+        # threads, would oversubscribe the cores
         torch.set_num_threads(int(cfg.train.threads))
-    robots = int(cfg.env.get("robots", 1))
-    learner = instantiate(
-        cfg.distance,
-        lateral_positions=[float(l) for l in cfg.curriculum.lateral_positions],
-        seed=seeds_for(int(cfg.seed), robots + 3)[robots + 2],
-    )
+    learner = distance_learner(cfg)
     tracker = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
     before = before_learner = None
-    records = _read_stream(run_dir)
+    records = read_stream(run_dir)
     if len(records) < int(summary["presentations"]):
         raise ReplayError(
             f"{run_dir / METRICS_NAME} has {len(records)} presentations, the summary "

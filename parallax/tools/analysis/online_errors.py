@@ -15,7 +15,6 @@ windowed total error at a few presentations:
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import sys
 from collections.abc import Sequence
@@ -23,12 +22,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from hydra.utils import instantiate
 
 from parallax.config import READOUT_PANS, distance_readout, load_run_config
-from parallax.experiment import seeds_for
+from parallax.experiment import distance_learner
 from parallax.metrics import DistanceErrorTracker, learn_online
-from parallax.tools.replay import ReplayError, _read_stream
+from parallax.tools.replay import ReplayError, parse_sweep, read_stream
 
 
 def trace(run_dir: str | Path, overrides: Sequence[str] = ()) -> list[dict]:
@@ -38,16 +36,11 @@ def trace(run_dir: str | Path, overrides: Sequence[str] = ()) -> list[dict]:
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
     cfg.merge_with_dotlist(list(overrides))
-    robots = int(cfg.env.robots)
-    learner = instantiate(
-        cfg.distance,
-        lateral_positions=[float(l) for l in cfg.curriculum.lateral_positions],
-        seed=seeds_for(int(cfg.seed), robots + 3)[robots + 2],
-    )
+    learner = distance_learner(cfg)
     tracker = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
     key = READOUT_PANS[distance_readout(cfg)]
     rows, fit = [], {}
-    for record in _read_stream(run_dir):
+    for record in read_stream(run_dir):
         if not record["learnt_distance"]:
             continue
         pans = np.atleast_2d(np.asarray(record[key], dtype=np.float64))
@@ -71,14 +64,6 @@ def trace(run_dir: str | Path, overrides: Sequence[str] = ()) -> list[dict]:
     return rows
 
 
-def _combinations(overrides: Sequence[str]) -> list[list[str]]:
-    choices = []
-    for item in overrides:
-        key, _, values = item.partition("=")
-        choices.append([f"{key}={v}" for v in values.split(",")])
-    return [list(c) for c in itertools.product(*choices)]
-
-
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("run", help="a finished parallax-train run directory")
@@ -91,7 +76,12 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(2)
     torch.set_num_threads(1)
     results = {}
-    for combo in _combinations(args.overrides):
+    try:
+        combos = parse_sweep(args.overrides)  # distance settings only, as parallax-replay
+    except ReplayError as exc:
+        print(f"online_errors: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    for combo in combos:
         label = " ".join(combo) or "(the run's settings)"
         try:
             rows = trace(args.run, combo)
@@ -102,13 +92,8 @@ def main(argv: list[str] | None = None) -> None:
         if not rows:
             print(f"{label}: no online prediction (the queue never filled)")
             continue
-        marks = sorted(
-            {
-                rows[0]["presentation"],
-                *[r["presentation"] for r in rows[:: len(rows) // 4 or 1]],
-                rows[-1]["presentation"],
-            }
-        )
+        every = rows[:: len(rows) // 4 or 1] + rows[-1:]
+        marks = sorted({r["presentation"] for r in every})
         window = {r["presentation"]: r["window_total_pct"] for r in rows}
         print(f"{label}: final windowed error {rows[-1]['window_total_pct']:.2f} %")
         print("  windowed total at " + ", ".join(f"{p}: {window[p]:.2f} %" for p in marks))

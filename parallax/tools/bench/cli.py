@@ -322,7 +322,7 @@ def main(argv: list[str] | None = None) -> None:
             file=sys.stderr,
         )
         sys.exit(2)
-    from parallax.train import composition_error
+    from parallax.config.overrides import composition_error
 
     error = composition_error(["curriculum=multi_5_10", *args.overrides], check=True)
     if error:
