@@ -89,7 +89,8 @@ class Experiment:
         self.stages = [[float(l) for l in stage] for stage in stages]
 
         env_kwargs = OmegaConf.to_container(cfg.env, resolve=True)
-        self.robots = int(env_kwargs.pop("robots", 1))
+        self.robots = int(env_kwargs.pop("robots"))
+        self.walk_options = env_kwargs.pop("walk")  # the body's walk, parallax.envs.walk
         if stimuli_split is not None:
             env_kwargs["stimuli"] = {**env_kwargs["stimuli"], "split": stimuli_split}
         self.trial_length = int(env_kwargs["trial_length"])

@@ -55,6 +55,27 @@ class StimuliConfig:
 
 
 @dataclass
+class WalkConfig:
+    """Beyond the paper (its second future work, §7): the body's walk straight to the panel after
+    a presentation's lateral sweep, until its left hand touches it (parallax.envs.walk). Only
+    runs with distance.targets=odometry walk. These are the body's true values; what the robot
+    believes its stride to be is distance.odometry.nominal_stride_m."""
+
+    #: The body's true stride length (m).
+    stride_m: float = 0.05
+    #: Each stride's length varies by this fraction (sd of a Gaussian factor 1 + slip·N(0, 1)).
+    stride_slip: float = 0.0
+    #: The stride that ends in touch is retaken in this many equal parts, so the robot also knows
+    #: how far into its last stride the touch came (odometry resolution stride_m / substeps).
+    substeps: int = 10
+    #: A growth spurt: the true stride is multiplied by this from ``growth_start_fraction`` of
+    #: train.presentations on, while the robot keeps its nominal stride (1: no spurt).
+    growth_factor: float = 1.0
+    #: Fraction of train.presentations after which the spurt happens; null: never.
+    growth_start_fraction: float | None = None
+
+
+@dataclass
 class EnvConfig:
     """The world (§4.1): HOAP-3-like humanoid, textured panel, still background, in MuJoCo.
 
@@ -79,6 +100,7 @@ class EnvConfig:
     #: B robots in lockstep, each with its own stimulus, distance and pan; one coder and policy
     #: call serves all of them (beyond the paper, for speed; B = 1 is the paper's single robot).
     robots: int = 1
+    walk: WalkConfig = field(default_factory=WalkConfig)
 
 
 # --- the sensory coder (coder/) --------------------------------------------------------------
@@ -219,6 +241,18 @@ class LevenbergMarquardtConfig:
 
 
 @dataclass
+class OdometryConfig:
+    """The robot's own measure of distance for distance.targets=odometry: strides counted on
+    a walk to the panel (env.walk) times the stride length it believes it has."""
+
+    #: Fraction of presentations that end with a walk (walking is costly); the others give the
+    #: learner no target and are only predicted.
+    walk_fraction: float = 1.0
+    #: The stride length the robot believes it has (m): its unit of distance.
+    nominal_stride_m: float = 0.05
+
+
+@dataclass
 class DistanceConfig:
     """Egocentric distance learner (§3.5–3.5.2, eqs. 9–15): queue memory, sensitive-position
     weighting, MLP r → hidden sigmoid → 1, trained by Levenberg–Marquardt."""
@@ -240,9 +274,14 @@ class DistanceConfig:
     #: LM epochs of the first fit, when the queue has just filled.
     initial_epochs: int = 100
     lm: LevenbergMarquardtConfig = field(default_factory=LevenbergMarquardtConfig)
-    #: Where the targets come from (parallax.distance.targets.TARGET_SOURCES): ground_truth, the
-    #: supervisor's distances (§3.5).
-    targets: str = "ground_truth"
+    #: Where the targets come from (parallax.distance.targets.TARGET_SOURCES): supervisor, the
+    #: true distances (§3.5) | odometry, beyond the paper (§7's second future work): the strides
+    #: of the robot's own walk to the panel (``odometry``, env.walk).
+    targets: str = "supervisor"
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    #: Fits start once the queue holds this many vectors; null: once it is full (§3.5). Fewer
+    #: targets arrive when only some presentations are labelled (odometry.walk_fraction < 1).
+    fit_from: int | None = None
     #: global: one mapminmax over all of S, as trainlm does | per_input: each position scaled on
     #: its own (which would cancel the weighting).
     input_scaling: str = "global"

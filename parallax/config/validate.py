@@ -125,6 +125,7 @@ def validate(cfg: DictConfig) -> None:
     _distance(check)
     _curriculum(check)
     _perturbation(check)
+    _walk(check)
     _stimuli(check)  # last: a folder of images is decoded here (once per process)
 
 
@@ -291,6 +292,22 @@ def _distance(check: _Checks) -> None:
 
     check.choice("distance.input_scaling", INPUT_SCALINGS)
     check.choice("distance.targets", sorted(TARGET_SOURCES))
+    check.number("distance.odometry.walk_fraction", above=0, at_most=1)
+    check.number("distance.odometry.nominal_stride_m", above=0, what=" (metres)")
+    if check.get("distance.fit_from") is not None:
+        fit_from = check.integer("distance.fit_from", 1)
+        if fit_from > queue:
+            check.fail(
+                "distance.fit_from", fit_from, f"must be ≤ distance.queue_size={queue}, or null"
+            )
+
+
+def _walk(check: _Checks) -> None:
+    check.number("env.walk.stride_m", above=0, what=" (metres)")
+    check.number("env.walk.stride_slip", at_least=0, below=0.5)
+    check.integer("env.walk.substeps", 1)
+    check.number("env.walk.growth_factor", above=0)
+    check.optional_number("env.walk.growth_start_fraction", at_least=0, at_most=1)
 
 
 def _curriculum(check: _Checks) -> None:

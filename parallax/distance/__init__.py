@@ -12,7 +12,8 @@ from parallax.distance.network import DistanceMLP
 from parallax.distance.queue_memory import QueueMemory
 from parallax.distance.targets import (
     TARGET_SOURCES,
-    GroundTruthTargets,
+    OdometryTargets,
+    SupervisorTargets,
     TargetSource,
     register_target_source,
 )
@@ -21,7 +22,8 @@ from parallax.distance.weighting import position_weights, sensitive_positions
 __all__ = [
     "DistanceLearner",
     "DistanceMLP",
-    "GroundTruthTargets",
+    "OdometryTargets",
+    "SupervisorTargets",
     "LMRunResult",
     "LMStepResult",
     "LevenbergMarquardt",

@@ -75,7 +75,9 @@ class DistanceLearner:
         epochs_per_call: int = 10,
         initial_epochs: int = 100,
         lm: Mapping[str, float] | None = None,
-        targets: str | TargetSource = "ground_truth",
+        targets: str | TargetSource = "supervisor",
+        odometry: Mapping[str, float] | None = None,
+        fit_from: int | None = None,
         input_scaling: str = "global",
     ) -> None:
         self.lateral_positions = [float(value) for value in lateral_positions]
@@ -108,14 +110,17 @@ class DistanceLearner:
         )
         self.optimizer = LevenbergMarquardt(self.network, **_merged("lm", LM_OPTIONS, {}, lm))
         self.queue = QueueMemory(queue_size, len(self.lateral_positions))
-        self.target_source = make_target_source(targets)
+        self.target_source = make_target_source(targets, dict(odometry or {}))
+        if fit_from is not None and (int(fit_from) != fit_from or not 1 <= fit_from <= queue_size):
+            raise ValueError(f"fit_from must be an integer in 1..queue_size, got {fit_from!r}")
+        self.fit_from = int(queue_size if fit_from is None else fit_from)
         self.fits = 0
         self.observations = 0
 
     @property
     def is_ready(self) -> bool:
-        """The queue is full and the network has been trained at least once."""
-        return self.queue.is_full and self.fits > 0
+        """The network has been trained at least once (the queue held ``fit_from`` vectors)."""
+        return self.fits > 0
 
     def _as_inputs(self, s: Tensor | np.ndarray | Sequence[float]) -> Tensor:
         inputs = torch.as_tensor(
@@ -180,7 +185,7 @@ class DistanceLearner:
             "stopped_non_finite": 0.0,
             "queue_fill": float(self.queue.fill),
         }
-        if not self.queue.is_full:
+        if self.queue.fill < self.fit_from:
             return stats
         return {**stats, **self._fit()}
 

@@ -1,8 +1,12 @@
-"""Where the distance learner's targets come from, paper §3.5 ("human supervision").
+"""Where the distance learner's targets come from: paper §3.5 ("human supervision") and, beyond
+the paper, §7's second future work (distance from the robot's own body).
 
-The paper trains on ground-truth distances given by a supervisor. Target sources are looked up
-by name in ``TARGET_SOURCES`` so that another source (e.g. a self-supervised one) can be added
-with ``@register_target_source("name")`` without touching the learner.
+``supervisor``: the true distances, handed over as the paper's supervisor does. ``odometry``: the
+robot walks to the panel until it touches it (parallax.envs.walk) and its target is the strides
+it counted times the stride it believes it has — its body's unit, not the supervisor's. A source
+turns a *reading* into a target: the supervisor's reading is the distance, odometry's the
+strides walked. Sources are looked up by name in ``TARGET_SOURCES``; another one is added with
+``@register_target_source("name")`` without touching the learner.
 """
 
 from __future__ import annotations
@@ -29,11 +33,23 @@ def register_target_source(name: str) -> Callable[[type[TargetSource]], type[Tar
 
 
 class TargetSource(ABC):
-    """Turns an observation (s, ground-truth distance) into the target the network learns."""
+    """Turns an observation (s, reading) into the target the network learns."""
+
+    #: Whether a reading needs the robot to walk to the panel (env.walk) after its sweep.
+    walks: bool = False
+    #: The fraction of presentations that end with a walk (those that do not get no target).
+    walk_fraction: float = 1.0
 
     @abstractmethod
-    def __call__(self, s: Tensor, distance_m: float) -> float:
-        """The target distance in metres for eye-movement vector ``s``."""
+    def __call__(self, s: Tensor, reading: float) -> float:
+        """The target for eye-movement vector ``s`` from this source's ``reading``."""
+
+    def truth(self, distance_m: float, walk_length_strides: float) -> float:
+        """What a perfect learner would answer for a panel at ``distance_m`` that the body,
+        as it is now, reaches in ``walk_length_strides`` of its true strides: the yardstick of
+        the error statistics (never a target)."""
+        del walk_length_strides
+        return float(distance_m)
 
     def state_dict(self) -> dict[str, object]:
         return {}
@@ -42,24 +58,55 @@ class TargetSource(ABC):
         del state
 
 
-@register_target_source("ground_truth")
-class GroundTruthTargets(TargetSource):
+@register_target_source("supervisor")
+class SupervisorTargets(TargetSource):
     """The simulator's true distance, as the paper's supervisor provides it."""
 
-    def __call__(self, s: Tensor, distance_m: float) -> float:
-        distance_m = float(distance_m)
+    def __call__(self, s: Tensor, reading: float) -> float:
+        distance_m = float(reading)
         if not math.isfinite(distance_m) or distance_m <= 0:
             raise ValueError(
-                "ground-truth distance must be a positive finite number of metres, "
+                f"the supervisor's distance must be a positive finite number of metres, "
                 f"got {distance_m!r}"
             )
         return distance_m
 
 
-def make_target_source(spec: str | TargetSource) -> TargetSource:
-    """A registered source by name, or ``spec`` itself if it already is a source."""
+@register_target_source("odometry")
+class OdometryTargets(TargetSource):
+    """Strides walked to touch the panel × the stride the robot believes it has (metres of its
+    own): the embodied meaning of "how far" (§7). A growth spurt changes the true stride, not
+    this one, so the targets follow the body."""
+
+    walks = True
+
+    def __init__(self, walk_fraction: float = 1.0, nominal_stride_m: float = 0.05) -> None:
+        if not 0.0 < float(walk_fraction) <= 1.0:
+            raise ValueError(f"walk_fraction must be in (0, 1], got {walk_fraction!r}")
+        if not float(nominal_stride_m) > 0.0:
+            raise ValueError(f"nominal_stride_m must be positive, got {nominal_stride_m!r}")
+        self.walk_fraction = float(walk_fraction)
+        self.nominal_stride_m = float(nominal_stride_m)
+
+    def __call__(self, s: Tensor, reading: float) -> float:
+        strides = float(reading)
+        if not math.isfinite(strides) or strides <= 0:
+            raise ValueError(f"a walk's stride count must be positive and finite, got {strides!r}")
+        return strides * self.nominal_stride_m
+
+    def truth(self, distance_m: float, walk_length_strides: float) -> float:
+        del distance_m
+        return float(walk_length_strides) * self.nominal_stride_m
+
+
+def make_target_source(
+    spec: str | TargetSource, odometry: dict[str, float] | None = None
+) -> TargetSource:
+    """A registered source by name (the odometry source with the ``odometry`` options), or
+    ``spec`` itself if it already is a source."""
     if isinstance(spec, TargetSource):
         return spec
     if spec not in TARGET_SOURCES:
         raise ValueError(f"unknown target source {spec!r}; registered: {sorted(TARGET_SOURCES)}")
-    return TARGET_SOURCES[spec]()
+    cls = TARGET_SOURCES[spec]
+    return cls(**(odometry or {})) if cls.walks else cls()

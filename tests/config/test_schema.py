@@ -19,8 +19,14 @@ from parallax.config import (
     PolicyConfig,
     compose,
 )
-from parallax.config.schema import GROUPS, SCHEMA_NODE, LevenbergMarquardtConfig, StimuliConfig
-from parallax.distance import DistanceLearner, LevenbergMarquardt
+from parallax.config.schema import (
+    GROUPS,
+    SCHEMA_NODE,
+    LevenbergMarquardtConfig,
+    OdometryConfig,
+    StimuliConfig,
+)
+from parallax.distance import DistanceLearner, LevenbergMarquardt, OdometryTargets
 from parallax.distance.learner import DEFAULT_SENSITIVITY
 from parallax.envs.stimuli import normalise_settings
 from parallax.policy import NaturalActorCritic
@@ -30,7 +36,9 @@ CONF = Path(__file__).resolve().parents[2] / "conf"
 #: benchmarks).
 NOT_SETTINGS = {MultiScaleCoder: {"pursuit"}}
 #: Arguments whose default None stands for a nested node of the schema, and that node's defaults.
-NESTED = {DistanceLearner: {"sensitivity": DEFAULT_SENSITIVITY, "lm": None}}
+NESTED = {
+    DistanceLearner: {"sensitivity": DEFAULT_SENSITIVITY, "lm": None, "odometry": OdometryTargets}
+}
 
 
 def _defaults(function) -> dict[str, object]:
@@ -78,6 +86,8 @@ def test_the_nested_defaults_are_the_schemas():
     sensitivity = OmegaConf.to_container(OmegaConf.structured(DistanceConfig)).get("sensitivity")
     assert DEFAULT_SENSITIVITY == sensitivity
     assert normalise_settings({}) == OmegaConf.to_container(OmegaConf.structured(StimuliConfig))
+    odometry = OmegaConf.to_container(OmegaConf.structured(OdometryConfig))
+    assert _defaults(OdometryTargets) == odometry
 
 
 def test_plain_parallax_train_is_the_schema():

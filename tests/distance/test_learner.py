@@ -242,7 +242,7 @@ def test_target_sources_are_pluggable():
         assert learner.queue.targets.tolist() == [4.0]
     finally:
         del TARGET_SOURCES["test_halved"]
-    assert "ground_truth" in TARGET_SOURCES
+    assert "supervisor" in TARGET_SOURCES
 
 
 def test_resume_continues_bit_identically():
