@@ -25,6 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 
 import parallax.envs
 from parallax.coding import CoderOutput
+from parallax.envs.walk import Walker, walk_robots
 from parallax.lockstep import Lockstep, stack_images
 from parallax.metrics import position_label
 
@@ -69,6 +70,39 @@ def distance_learner(cfg: DictConfig):
     )
 
 
+def worlds(cfg: DictConfig, lateral_positions: list[float], stimuli_split: str | None = None):
+    """The run's B worlds (``parallax.envs.load``), unperturbed, robot b's with the run's b-th
+    seed; ``stimuli_split`` replaces env.stimuli.split (parallax-eval: heldout)."""
+    env_kwargs = OmegaConf.to_container(cfg.env, resolve=True)
+    robots = int(env_kwargs.pop("robots"))
+    env_kwargs.pop("walk")  # the body's walk: parallax.envs.walk, body_walkers
+    if stimuli_split is not None:
+        env_kwargs["stimuli"] = {**env_kwargs["stimuli"], "split": stimuli_split}
+    seeds = seeds_for(cfg.seed, robots + 3)
+    return [
+        parallax.envs.load(
+            seed=seeds[b],
+            lateral_positions=lateral_positions,
+            camera_rotation_deg=0.0,
+            blur_sigma=0.0,
+            rotation_axis=cfg.perturbation.rotation_axis,
+            **env_kwargs,
+        )
+        for b in range(robots)
+    ]
+
+
+def body_walkers(cfg: DictConfig) -> list[Walker]:
+    """Each robot's walk to the panel (env.walk; beyond the paper, §7), with its own slip stream:
+    from the run's seed after the worlds', the coder's, the policy's and the learner's, so those
+    stay as they were."""
+    robots = int(cfg.env.robots)
+    seeds = seeds_for(seeds_for(cfg.seed, robots + 4)[robots + 3], robots)
+    options = OmegaConf.to_container(cfg.env.walk, resolve=True)
+    options.pop("growth_start_fraction")  # the trainer's schedule (parallax.config.growth_start)
+    return [Walker(seed=seed, **options) for seed in seeds]
+
+
 class Experiment:
     """The world(s), coder, policy and distance learner of one run, built from a config."""
 
@@ -88,25 +122,11 @@ class Experiment:
         stages = cfg.curriculum.get("stages") or [self.lateral_positions]
         self.stages = [[float(l) for l in stage] for stage in stages]
 
-        env_kwargs = OmegaConf.to_container(cfg.env, resolve=True)
-        self.robots = int(env_kwargs.pop("robots"))
-        self.walk_options = env_kwargs.pop("walk")  # the body's walk, parallax.envs.walk
-        if stimuli_split is not None:
-            env_kwargs["stimuli"] = {**env_kwargs["stimuli"], "split": stimuli_split}
-        self.trial_length = int(env_kwargs["trial_length"])
+        self.robots = int(cfg.env.robots)
+        self.trial_length = int(cfg.env.trial_length)
         # One seed per robot's world, then the coder, the policy and the distance learner.
         seeds = seeds_for(cfg.seed, self.robots + 3)
-        self.envs = [
-            parallax.envs.load(
-                seed=seeds[i],
-                lateral_positions=self.stages[0],
-                camera_rotation_deg=0.0,
-                blur_sigma=0.0,
-                rotation_axis=cfg.perturbation.rotation_axis,
-                **env_kwargs,
-            )
-            for i in range(self.robots)
-        ]
+        self.envs = worlds(cfg, self.stages[0], stimuli_split)
         self.coder = instantiate(
             cfg.coder, image_size=int(cfg.env.image_size), seed=seeds[self.robots]
         ).to(self.device)
@@ -119,6 +139,7 @@ class Experiment:
         self.distance = distance_learner(cfg)
         if hasattr(self.distance, "to"):  # DistanceLearner.to, or an nn.Module
             self.distance.to(self.device)
+        self.walkers = body_walkers(cfg)
         self.stage = 0
 
     # --- curriculum and perturbation -------------------------------------------------------
@@ -143,6 +164,36 @@ class Experiment:
                 camera_rotation_deg=float(p.camera_rotation_deg) if on else 0.0,
                 blur_sigma=float(p.blur_sigma) if on else 0.0,
             )
+
+    # --- the walk to the panel (beyond the paper, §7) ----------------------------------------
+    @property
+    def walks(self) -> bool:
+        """Whether the distance learner's targets need walks (distance.targets=odometry)."""
+        return bool(getattr(getattr(self.distance, "target_source", None), "walks", False))
+
+    def walk(self) -> tuple[list[float | None], list[float]]:
+        """After a sweep: each robot walks to its panel with probability
+        distance.odometry.walk_fraction; its strides counted (None: it stayed) and the
+        slip-free count (:func:`parallax.envs.walk.walk_robots`)."""
+        fraction = self.distance.target_source.walk_fraction
+        return walk_robots([env.physics for env in self.envs], self.walkers, fraction)
+
+    def distance_truths(self, distances: np.ndarray) -> np.ndarray:
+        """What a perfect distance learner answers for panels at ``distances`` (robot 0's body
+        as it is now): the distances themselves, or the odometry's slip-free reading."""
+        source = getattr(self.distance, "target_source", None)
+        if not self.walks:
+            return np.asarray(distances, dtype=np.float64)
+        physics, walker = self.envs[0].physics, self.walkers[0]
+        return np.array(
+            [source.truth(d, walker.reach_strides(physics, d)) for d in distances],
+            dtype=np.float64,
+        )
+
+    def set_growth(self, grown: bool) -> None:
+        """The bodies' strides before or after the growth spurt of env.walk."""
+        for walker in self.walkers:
+            walker.grown = bool(grown)
 
     # --- one presentation: the paper's loop -----------------------------------------------
     def run_presentation(
@@ -199,6 +250,8 @@ class Experiment:
             "distance": self.distance.state_dict(),
             "env_random": [env.task.random.get_state() for env in self.envs],
             "stage": self.stage,
+            # only a walking run draws from the walkers' streams
+            **({"walkers": [w.state_dict() for w in self.walkers]} if self.walks else {}),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -207,6 +260,9 @@ class Experiment:
         self.distance.load_state_dict(state["distance"])
         for env, rs in zip(self.envs, state["env_random"], strict=True):
             env.task.random.set_state(rs)
+        if self.walks:
+            for walker, walker_state in zip(self.walkers, state["walkers"], strict=True):
+                walker.load_state_dict(walker_state)
         self.set_stage(state["stage"])
 
     def close(self) -> None:

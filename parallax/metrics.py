@@ -100,19 +100,29 @@ class DistanceErrorTracker:
 
 
 def learn_online(
-    learner, tracker: DistanceErrorTracker, pans: np.ndarray, distances: np.ndarray
+    learner,
+    tracker: DistanceErrorTracker,
+    pans: np.ndarray,
+    truths: np.ndarray,
+    readings: Sequence[float | None] | None = None,
 ) -> dict[str, float]:
-    """Paper §3.5 online: predict each new s before learning it (the honest online error, kept by
-    `tracker`), then queue it (eq. 9) and fit. The rows of ``pans`` are one presentation's
-    vectors, one per robot: all are predicted, then queued, then fitted once (with one robot,
-    exactly the paper's loop; see ``DistanceLearner.observe_batch``). Returns the fit's
-    statistics ({} if none). Shared by the trainer and parallax-replay so that a replay is the
-    run's distance learner."""
+    """Paper §3.5 online: predict each new s before learning it (the honest online error against
+    ``truths``, kept by `tracker`), then queue it with its target (eq. 9) and fit. The rows of
+    ``pans`` are one presentation's vectors, one per robot: all are predicted, then queued, then
+    fitted once (with one robot, exactly the paper's loop; see
+    ``DistanceLearner.observe_batch``). ``readings`` are what the target source makes targets
+    from (default: ``truths``, the supervisor's distances); a None reading (a robot that did not
+    walk) is predicted but not learnt. Returns the fit's statistics ({} if none). Shared by the
+    trainer and parallax-replay so that a replay is the run's distance learner."""
     pans = np.atleast_2d(np.asarray(pans, dtype=np.float64))
-    distances = np.asarray(distances, dtype=np.float64).reshape(-1)
+    truths = np.asarray(truths, dtype=np.float64).reshape(-1)
+    readings = list(truths) if readings is None else list(readings)
     if learner.is_ready:
         predictions = np.asarray(learner.predict(pans), dtype=np.float64).reshape(-1)
-        for predicted, d in zip(predictions, distances):
-            tracker.record(float(predicted), float(d))
-    stats = learner.observe_batch(pans, [float(d) for d in distances])
+        for predicted, truth in zip(predictions, truths):
+            tracker.record(float(predicted), float(truth))
+    labelled = [i for i, reading in enumerate(readings) if reading is not None]
+    if not labelled:
+        return {}
+    stats = learner.observe_batch(pans[labelled], [float(readings[i]) for i in labelled])
     return {k: float(v) for k, v in stats.items()} if stats else {}

@@ -30,6 +30,7 @@ from parallax.config import (
     READOUT_PANS,
     RUN_CONFIG_NAME,
     distance_readout,
+    growth_start,
     perturbation_start,
     start_jitter_on,
 )
@@ -54,6 +55,8 @@ class Trainer:
         self.before_perturbation: dict | None = None
         self.last_distance_stats: dict[str, float] = {}
         self.perturbation_start = perturbation_start(cfg)
+        self.growth_start = growth_start(cfg)
+        self.last_walk: dict = {}
 
     # --- paths -----------------------------------------------------------------------------
     @property
@@ -106,11 +109,32 @@ class Trainer:
         return True
 
     # --- one presentation ------------------------------------------------------------------
-    def _learn_distance(self, pres: Presentation) -> None:
+    def _learn_distance(self, pres: Presentation) -> dict:
+        """The distance learner's step after a presentation; with odometry targets, the walks
+        first. Returns what the walks were, for the log ({} without)."""
         pans = getattr(pres, READOUT_PANS[distance_readout(self.cfg)])
-        stats = learn_online(self.exp.distance, self.dist, pans, pres.distances)
+        walked: dict = {}
+        if self.exp.walks:
+            counted, reach = self.exp.walk()
+            source = self.exp.distance.target_source
+            truths = [source.truth(d, r) for d, r in zip(pres.distances, reach)]
+            stride, nominal = self.exp.walkers[0].true_stride_m, source.nominal_stride_m
+            walked = {
+                "walk_strides": counted,
+                "reach_strides": reach,
+                # what the robot believes it walked against what it walked, in %
+                "odometry_error_pct": [
+                    None if n is None else 100.0 * (n * nominal / (r * stride) - 1.0)
+                    for n, r in zip(counted, reach)
+                ],
+                "true_stride_m": stride,
+            }
+            stats = learn_online(self.exp.distance, self.dist, pans, truths, counted)
+        else:
+            stats = learn_online(self.exp.distance, self.dist, pans, pres.distances)
         if stats:
             self.last_distance_stats = stats
+        return walked
 
     def _maybe_advance_stage(self) -> None:
         if self.exp.on_final_list:
@@ -132,8 +156,7 @@ class Trainer:
             for p, label in enumerate(pres.labels):
                 self.eye.record(label, pres.pans[b, p], pres.targets[b, p])
         learnt_distance = self.exp.on_final_list
-        if learnt_distance:
-            self._learn_distance(pres)
+        walked = self._learn_distance(pres) if learnt_distance else {}
         ran_perturbed = self.perturbed  # before the count moves on: how this presentation ran
         self.presentation += 1
         self.steps += pres.steps
@@ -165,9 +188,16 @@ class Trainer:
             "start_pans": pres.start_pans.tolist(),
             "start_jitter": jittered,
             "learnt_distance": learnt_distance,
+            # with distance.targets=odometry: each robot's strides to the panel (None: it did not
+            # walk), the slip-free count, and the odometry's error
+            **walked,
             **{f"lm_{k}": v for k, v in self.last_distance_stats.items()},
         }
         return pres, record
+
+    @property
+    def grown(self) -> bool:
+        return self.growth_start is not None and self.presentation >= self.growth_start
 
     @property
     def perturbed(self) -> bool:
@@ -218,6 +248,14 @@ class Trainer:
             writer.add_scalar(f"distance/error_pct_{rng}", v, step)
         writer.add_scalar("perf/steps_per_second", steps_per_second, step)
         writer.add_scalar("curriculum/stage", record["stage"], step)
+        if "walk_strides" in record:
+            counted = [n for n in record["walk_strides"] if n is not None]
+            writer.add_scalar("walk/walks", len(counted), step)
+            writer.add_scalar("walk/true_stride_m", record["true_stride_m"], step)
+            if counted:
+                writer.add_scalar("walk/strides", float(np.mean(counted)), step)
+                errors = [e for e in record["odometry_error_pct"] if e is not None]
+                writer.add_scalar("walk/odometry_error_pct", float(np.mean(errors)), step)
 
     def _log_images(self, writer: SummaryWriter, pres: Presentation) -> None:
         for scale in self.exp.coder.scales:
@@ -239,6 +277,7 @@ class Trainer:
         (self.run_dir / RUN_CONFIG_NAME).write_text(OmegaConf.to_yaml(cfg, resolve=True))
         if self.perturbed:
             self.exp.set_perturbation(True)
+        self.exp.set_growth(self.grown)
         writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.steps if resumed else None)
         if not resumed:
             writer.add_text("config", "```yaml\n" + OmegaConf.to_yaml(cfg) + "\n```", 0)
@@ -266,6 +305,8 @@ class Trainer:
                             self.state_dict(), self.run_dir / checkpoint.BEFORE_PERTURBATION_NAME
                         )
                         self.exp.set_perturbation(True)
+                    if self.presentation == self.growth_start:
+                        self.exp.set_growth(True)  # the body's stride grows; the robot's belief not
                     keep_view = (self.presentation + 1) % int(cfg.train.image_every) == 0
                     t0 = time.perf_counter()
                     pres, record = self.step_presentation(keep_view)

@@ -193,6 +193,15 @@ def perturbation_start(cfg) -> int | None:
     return int(round(float(fraction) * int(total)))
 
 
+def growth_start(cfg) -> int | None:
+    """Presentation index from which the body's grown stride is used (None: never): the one place
+    ``env.walk.growth_start_fraction`` becomes a presentation (the trainer and parallax-replay)."""
+    fraction = cfg["env"]["walk"]["growth_start_fraction"]
+    if fraction is None:
+        return None
+    return int(round(float(fraction) * int(cfg["train"]["presentations"])))
+
+
 #: How a trial's pan becomes a component of s: "last", the pan at its last iteration (the paper's
 #: q_p, eq. 16); "best_reward" (beyond the paper), the pan whose image the coder encoded best
 #: during the trial. The trainer, parallax-replay and parallax-eval share these names.

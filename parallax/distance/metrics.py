@@ -31,8 +31,10 @@ def _as_array(values: Sequence[float] | np.ndarray | torch.Tensor) -> np.ndarray
 def distance_error_by_range(
     d_hat: Sequence[float] | np.ndarray | torch.Tensor,
     d: Sequence[float] | np.ndarray | torch.Tensor,
+    at: Sequence[float] | np.ndarray | None = None,
 ) -> dict[str, float]:
-    """Mean |d̂ − d|/d in percent for "3-4.9", "5-6.9", "7-10" (metres) and "total"."""
+    """Mean |d̂ − d|/d in percent for "3-4.9", "5-6.9", "7-10" (metres) and "total"; the ranges
+    are of ``at`` if given (the panels' distances, when d is in another unit: odometry's)."""
     estimates, truths = _as_array(d_hat), _as_array(d)
     if estimates.shape != truths.shape or truths.size == 0:
         raise ValueError(
@@ -43,7 +45,8 @@ def distance_error_by_range(
         bad = truths[~np.isfinite(truths) | (truths <= 0)][0]
         raise ValueError(f"true distances must be positive and finite, got {bad!r}")
     errors = 100.0 * np.abs(estimates - truths) / truths
-    grid = np.round(truths, 9)  # 3.0 + 20·0.1 may land a hair below 5.0
+    # 3.0 + 20·0.1 may land a hair below 5.0
+    grid = np.round(truths if at is None else _as_array(at), 9)
     result: dict[str, float] = {}
     for name, (low, high, high_included) in RANGES.items():
         inside = (grid >= low) & ((grid <= high) if high_included else (grid < high))

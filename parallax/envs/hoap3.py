@@ -216,6 +216,17 @@ class Physics(dm_mujoco.Physics):
         self.data.mocap_pos[self._robot_mocap, 1] = -_check_finite("lateral position", lateral_m)
         self.forward()
 
+    def forward_position(self) -> float:
+        """How far the body has walked towards the panel from its place in the sweep (m)."""
+        return float(self.data.mocap_pos[self._robot_mocap, 0])
+
+    def set_forward_position(self, forward_m: float) -> None:
+        """Put the body ``forward_m`` metres ahead (towards the panel) of its place in the sweep;
+        the kinematics (not the rest of mj_forward) are recomputed, which is all that the walk's
+        touch query (parallax.envs.walk) reads."""
+        self.data.mocap_pos[self._robot_mocap, 0] = _check_finite("forward position", forward_m)
+        mujoco.mj_kinematics(self.model.ptr, self.data.ptr)
+
     def distance(self) -> float:
         """Distance d (m) from the left eye at l0 to the panel."""
         return self._distance

@@ -80,22 +80,30 @@ def mae_by_start(run: dict[str, np.ndarray]) -> dict[str, float]:
     return out
 
 
-def distance_results(learner, pans: np.ndarray, distances: np.ndarray) -> dict:
-    """Errors by range and per distance of ``learner`` on the eye-movement vectors ``pans``; the
-    vectors themselves are kept ("samples") so that parallax-replay can score other learners on
-    exactly the same eye movements."""
+def distance_results(
+    learner, pans: np.ndarray, distances: np.ndarray, truths: np.ndarray | None = None
+) -> dict:
+    """Errors by range and per distance of ``learner`` on the eye-movement vectors ``pans``, and
+    the mean absolute error in the learner's metres. ``truths``: what a perfect learner would
+    answer (default: the distances; for odometry targets the slip-free walk,
+    ``Experiment.distance_truths``); the ranges stay those of the panels' distances. The
+    vectors are kept ("samples") so that parallax-replay can score other learners on exactly the
+    same eye movements."""
     from parallax.distance.metrics import distance_error_by_range
 
     pred = np.asarray(learner.predict(np.asarray(pans)), dtype=np.float64).reshape(-1)
-    true = np.asarray(distances, dtype=np.float64)
+    at = np.asarray(distances, dtype=np.float64)
+    true = at if truths is None else np.asarray(truths, dtype=np.float64).reshape(-1)
     rel = np.abs(pred - true) / true * 100.0
     per_distance = {}
-    for d in np.unique(true):
-        per_distance[f"{d:.2f}"] = float(rel[true == d].mean())
+    for d in np.unique(at):
+        per_distance[f"{d:.2f}"] = float(rel[at == d].mean())
     return {
-        "by_range": distance_error_by_range(pred, true),
+        "by_range": distance_error_by_range(pred, true, at=at),
+        "mae_m": float(np.abs(pred - true).mean()),
+        "trials": int(at.size),
         "per_distance": per_distance,
-        "samples": {"pans": np.asarray(pans).tolist(), "distances": true.tolist()},
+        "samples": {"pans": np.asarray(pans).tolist(), "distances": at.tolist()},
     }
 
 
@@ -214,14 +222,21 @@ def evaluate(
             }
         curves = {}
         if exp.distance.is_ready:
+            grid_distances = runs["greedy"]["distances"]
             result["distance"] = distance_results(
-                exp.distance, runs["greedy"]["pans"], runs["greedy"]["distances"]
+                exp.distance,
+                runs["greedy"]["pans"],
+                grid_distances,
+                exp.distance_truths(grid_distances),
             )
             pd = result["distance"]["per_distance"]
             curves["grid (held-out textures)"] = ([float(k) for k in pd], list(pd.values()))
             if between_run is not None:
                 result["distance_between_grid"] = distance_results(
-                    exp.distance, between_run["pans"], between_run["distances"]
+                    exp.distance,
+                    between_run["pans"],
+                    between_run["distances"],
+                    exp.distance_truths(between_run["distances"]),
                 )
                 pb = result["distance_between_grid"]["per_distance"]
                 curves["between grid points"] = ([float(k) for k in pb], list(pb.values()))

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import functools
 import itertools
 import json
 import statistics
@@ -40,10 +41,12 @@ from parallax.config import (
     READOUT_PANS,
     RUN_CONFIG_NAME,
     distance_readout,
+    growth_start,
     load_run_config,
     run_name,
 )
-from parallax.experiment import distance_learner
+from parallax.envs.walk import walk_robots
+from parallax.experiment import body_walkers, distance_learner, worlds
 from parallax.metrics import DistanceErrorTracker, learn_online
 from parallax.tools.report.runs import (
     METRICS_NAME,
@@ -53,6 +56,9 @@ from parallax.tools.report.runs import (
     find_run_dirs,
     read_metrics,
 )
+
+#: Settings a replay may change: the distance learner's, and the body's walk to the panel.
+REPLAYABLE_PREFIXES = ("distance.", "env.walk.")
 
 
 class ReplayError(ValueError):
@@ -69,10 +75,11 @@ def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
             raise ReplayError(
                 f"{item!r} is neither an existing directory nor an override KEY=VALUE[,VALUE…]"
             )
-        # the readout only picks which of the two logged pans of each trial s is built from
-        if not (key.startswith("distance.") or key == "train.distance_readout"):
+        # the readout only picks which of the two logged pans of each trial s is built from; the
+        # walk to the panel comes after the sweep, with its own random stream
+        if not (key.startswith(REPLAYABLE_PREFIXES) or key == "train.distance_readout"):
             raise ReplayError(
-                f"override {item!r}: only distance.* settings and train.distance_readout "
+                f"override {item!r}: only distance.*, env.walk.* and train.distance_readout "
                 "can be replayed (anything else changes the eye movements: train a new run)"
             )
         axes.append([f"{key}={v}" for v in values.split(",")])
@@ -137,21 +144,35 @@ def replay(
             "it can be replayed with train.distance_readout=last only"
         )
     before_tracker = last_stats = before_stats = None
+    body = _Body(cfg) if learner.target_source.walks else None
+    before_grown = False
     for record in records[: int(summary["presentations"])]:
+        if body is not None:
+            body.presentation(int(record["presentation"]) - 1)
         if record["perturbed"] and before is None:
             before = tracker.by_range()
             before_learner = copy.deepcopy(
                 learner
             )  # the model of checkpoint_before_perturbation.pt
             before_tracker, before_stats = copy.deepcopy(tracker), last_stats
+            before_grown = body is not None and body.grown
             if until_perturbation:
                 break
         if record["learnt_distance"]:
-            last_stats = (
-                learn_online(learner, tracker, record[key], record["distances"]) or last_stats
-            )
+            truths, readings = record["distances"], None
+            if body is not None:
+                truths, readings = body.walk(learner.target_source, record["distances"])
+            last_stats = learn_online(learner, tracker, record[key], truths, readings) or last_stats
     cut = until_perturbation and summary.get("before_perturbation") is not None
-    evals = _rescore_evals(run_dir, summary, before_learner, None if cut else learner, readout)
+    truths = {
+        "before": None if body is None else functools.partial(body.truths, grown=before_grown),
+        "final": None if body is None else functools.partial(body.truths, grown=body.grown),
+    }
+    evals = _rescore_evals(
+        run_dir, summary, before_learner, None if cut else learner, readout, truths
+    )
+    if body is not None:
+        body.close()
     if cut:
         return {**_cut_at_perturbation(cfg, summary, tracker, run_dir, overrides), "evals": evals}
     summary["distance_error"] = tracker.by_range()
@@ -184,13 +205,57 @@ def _replayed_checkpoint(source: Path, learner, tracker, stats, before_perturbat
     return state
 
 
+class _Body:
+    """The bodies of a replayed run that walks (distance.targets=odometry): its worlds (physics
+    only), its walkers with the trainer's seeds, and the growth spurt's schedule."""
+
+    def __init__(self, cfg: DictConfig) -> None:
+        self.envs = worlds(cfg, [float(l) for l in cfg.curriculum.lateral_positions])
+        self.walkers = body_walkers(cfg)
+        self.growth_start = growth_start(cfg)
+
+    @property
+    def grown(self) -> bool:
+        return self.walkers[0].grown
+
+    def presentation(self, index: int) -> None:
+        """Presentation ``index`` (0-based) is next: the body grown or not, as in training."""
+        for walker in self.walkers:
+            walker.grown = self.growth_start is not None and index >= self.growth_start
+
+    def walk(self, source, distances: Sequence[float]) -> tuple[list[float], list[float | None]]:
+        """The walks after a sweep with panels at ``distances``: the truths and the readings."""
+        physics = [env.physics for env in self.envs]
+        for body, d in zip(physics, distances, strict=True):
+            body.set_stimulus(body.texture_index(), float(d))
+        counted, reach = walk_robots(physics, self.walkers, source.walk_fraction)
+        return [source.truth(d, r) for d, r in zip(distances, reach)], counted
+
+    def truths(self, source, distances: Sequence[float], grown: bool) -> list[float]:
+        """A perfect learner's answers for panels at ``distances`` with the body grown or not."""
+        walker, physics = copy.deepcopy(self.walkers[0]), self.envs[0].physics
+        walker.grown = grown
+        return [source.truth(d, walker.reach_strides(physics, d)) for d in distances]
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
 def _rescore_evals(
-    run_dir: Path, summary: dict, before_learner, final_learner, readout: str = "last"
+    run_dir: Path,
+    summary: dict,
+    before_learner,
+    final_learner,
+    readout: str = "last",
+    truths: dict | None = None,
 ) -> dict[str, dict]:
     """The source's parallax-eval results with the distances re-predicted by the replayed
     learners, on the very eye movements the eval recorded (eval.json "samples"); keyed by the
     eval file's path relative to the run. The frozen eye is the source's, so the eye-movement
-    numbers are kept as they are. Evals that read s otherwise than ``readout`` are left out."""
+    numbers are kept as they are. Evals that read s otherwise than ``readout`` are left out.
+    ``truths`` ("before", "final"): for odometry targets, (source, distances) → the slip-free
+    readings of the body at that checkpoint; None: the distances."""
     from parallax.tools.evaluate import distance_results
 
     rescored = {}
@@ -203,12 +268,15 @@ def _rescore_evals(
         at = int(result.get("presentations", -1))
         if result.get("perturbed") or start is None:
             learner = final_learner if at == int(summary["presentations"]) else None
+            truth = (truths or {}).get("final")
         else:
             learner = before_learner if at == start else None
+            truth = (truths or {}).get("before")
         if learner is None or not learner.is_ready:
             continue
         for key, kept in samples.items():
-            result[key] = distance_results(learner, kept["pans"], kept["distances"])
+            at_truth = None if truth is None else truth(learner.target_source, kept["distances"])
+            result[key] = distance_results(learner, kept["pans"], kept["distances"], at_truth)
         result["replayed_from"] = str(path)
         rescored[str(path.relative_to(run_dir))] = result
     return rescored
