@@ -124,7 +124,7 @@ def replay(
         # threads, would oversubscribe the cores
         torch.set_num_threads(int(cfg.train.threads))
     learner = distance_learner(cfg)
-    tracker = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
+    tracker = _OnlineHistory(window=int(cfg.metrics.distance_window))
     before = before_learner = None
     records = read_stream(run_dir)
     if len(records) < int(summary["presentations"]):
@@ -147,8 +147,6 @@ def replay(
     body = _Body(cfg) if learner.target_source.walks else None
     before_grown = False
     for record in records[: int(summary["presentations"])]:
-        if body is not None:
-            body.presentation(int(record["presentation"]) - 1)
         if record["perturbed"] and before is None:
             before = tracker.by_range()
             before_learner = copy.deepcopy(
@@ -158,7 +156,10 @@ def replay(
             before_grown = body is not None and body.grown
             if until_perturbation:
                 break
+        if body is not None:  # as the trainer: the spurt after the checkpoint at the switch
+            body.presentation(int(record["presentation"]) - 1)
         if record["learnt_distance"]:
+            tracker.presentation = int(record["presentation"])
             truths, readings = record["distances"], None
             if body is not None:
                 truths, readings = body.walk(learner.target_source, record["distances"])
@@ -188,6 +189,7 @@ def replay(
         "config": cfg,
         "summary": summary,
         "evals": evals,
+        "online": tracker.history,
         "source": run_dir,
         "checkpoints": {name: parts for name, parts in checkpoints.items() if parts[0] is not None},
     }
@@ -203,6 +205,20 @@ def _replayed_checkpoint(source: Path, learner, tracker, stats, before_perturbat
     if "before_perturbation" in state and state["before_perturbation"] is not None:
         state["before_perturbation"] = before_perturbation
     return state
+
+
+class _OnlineHistory(DistanceErrorTracker):
+    """The online error tracker, also keeping every prediction (presentation, d̂, truth): the
+    learning curve of a replay (e.g. its recovery after a growth spurt)."""
+
+    def __init__(self, window: int) -> None:
+        super().__init__(window=window)
+        self.presentation = 0
+        self.history: list[tuple[int, float, float]] = []
+
+    def record(self, predicted_m: float, true_m: float) -> None:
+        super().record(predicted_m, true_m)
+        self.history.append((self.presentation, float(predicted_m), float(true_m)))
 
 
 class _Body:

@@ -1,0 +1,269 @@
+"""Distance from the robot's own body (beyond the paper: its second future work, §7), measured.
+
+The distance learner of §3.5 is told the true distance. With ``distance.targets=odometry`` it
+learns instead from the robot's walks to the panel (parallax.envs.walk): strides counted until
+its hand touches the panel, times the stride it believes it has. The walk comes after the sweep,
+with its own random stream, so a finished supervised run's eye movements serve both learners:
+each figure here is a ``parallax-replay`` of such a run (its metrics.jsonl and its parallax-eval
+samples, held-out photographs), with the overrides printed beside it.
+
+- **Table**: held-out error (metres of the robot's own, converted with its nominal stride, against
+  the slip-free walk to touch) for walk fraction × stride slip, and the ratio to the supervised
+  learner on the same eye movements. With a fraction f < 1 only f of the presentations bring a
+  target, so fits start once the queue holds round(f·c) of them (``distance.fit_from``), after as
+  many presentations as the supervised learner waits.
+- **Growth spurt**: the true stride grows by ``--growth`` part-way (env.walk.growth_*) while the
+  robot keeps its nominal stride: the online error in body units before and after, and the
+  presentations until it is back within 1.2× of its level before the spurt.
+
+    python -m parallax.tools.analysis.embodied RUN_OR_MULTIRUN… --out DIR
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from parallax.config import load_run_config
+from parallax.tools.replay import ReplayError, find_sources, replay
+
+FRACTIONS = (1.0, 0.3, 0.1)
+SLIPS = (0.0, 0.02, 0.05)
+#: The spurt: the body's stride × 1.1 from 60 % of the run on (after §5's perturbation, which the
+#: recipe switches on at a third), leaving 160 of 400 presentations to adapt.
+GROWTH_FACTOR = 1.1
+GROWTH_START_FRACTION = 0.6
+#: Recovery: the rolling mean of the online error over this many presentations back within
+#: RECOVERED × its mean over the same number of presentations before the spurt.
+ROLLING = 20
+RECOVERED = 1.2
+FINAL_EVAL = "eval.json"
+BEFORE_EVAL = "eval_before/eval.json"
+
+
+def cell_overrides(queue_size: int, fraction: float, slip: float) -> list[str]:
+    """The replay overrides of one table cell."""
+    fit_from = "null" if fraction == 1.0 else str(max(1, round(queue_size * fraction)))
+    return [
+        "distance.targets=odometry",
+        f"distance.odometry.walk_fraction={fraction:g}",
+        f"env.walk.stride_slip={slip:g}",
+        f"distance.fit_from={fit_from}",
+    ]
+
+
+def growth_overrides(factor: float, start_fraction: float) -> list[str]:
+    return [
+        "distance.targets=odometry",
+        f"env.walk.growth_factor={factor:g}",
+        f"env.walk.growth_start_fraction={start_fraction:g}",
+    ]
+
+
+def eval_scores(result: dict, name: str) -> dict | None:
+    """Held-out error of a replay's rescored eval ``name``: MAE in metres, total %, trials."""
+    evaluation = result["evals"].get(name)
+    if evaluation is None or "distance" not in evaluation:
+        return None
+    scores = {
+        "mae_m": evaluation["distance"]["mae_m"],
+        "total_pct": evaluation["distance"]["by_range"]["total"],
+        "trials": evaluation["distance"]["trials"],
+        "distances": len(evaluation["distance"]["per_distance"]),
+    }
+    between = evaluation.get("distance_between_grid")
+    if between is not None:
+        scores["between_mae_m"] = between["mae_m"]
+        scores["between_trials"] = between["trials"]
+    return scores
+
+
+def recovery(online: Sequence[tuple[int, float, float]], start: int) -> dict:
+    """The online error (% of the truth, i.e. in body units) around a spurt at presentation
+    ``start``: its level before, its peak after, and the presentations until recovered."""
+    presentations = np.array([p for p, _, _ in online])
+    errors = np.array([100.0 * abs(d - t) / t for _, d, t in online])
+    before = errors[(presentations > start - ROLLING) & (presentations <= start)]
+    after_at, after = presentations[presentations > start], errors[presentations > start]
+    level = float(before.mean()) if before.size else float("nan")
+    rolling = np.convolve(after, np.ones(ROLLING) / ROLLING, mode="valid")
+    back = np.flatnonzero(rolling <= RECOVERED * level)
+    return {
+        "before_pct": level,
+        "peak_pct": float(rolling.max()) if rolling.size else float("nan"),
+        "end_pct": float(rolling[-1]) if rolling.size else float("nan"),
+        "presentations_to_recover": int(after_at[back[0]] - start) if back.size else None,
+        "curve": {
+            "presentation": presentations.tolist(),
+            "error_pct": errors.tolist(),
+        },
+    }
+
+
+def study(sources: Sequence[Path]) -> dict:
+    """Every replay of the table and the spurt, for each source run."""
+    rows: list[dict] = []
+    growth: list[dict] = []
+    for source in sources:
+        cfg = load_run_config(source)
+        queue = int(cfg.distance.queue_size)
+        supervised = replay(source, [])
+        base = {"source": str(source), "seed": int(cfg.seed)}
+        rows.append(
+            {
+                **base,
+                "targets": "supervisor",
+                "overrides": [],
+                "final": eval_scores(supervised, FINAL_EVAL),
+                "before": eval_scores(supervised, BEFORE_EVAL),
+            }
+        )
+        for fraction in FRACTIONS:
+            for slip in SLIPS:
+                overrides = cell_overrides(queue, fraction, slip)
+                result = replay(source, overrides)
+                rows.append(
+                    {
+                        **base,
+                        "targets": "odometry",
+                        "walk_fraction": fraction,
+                        "stride_slip": slip,
+                        "overrides": overrides,
+                        "final": eval_scores(result, FINAL_EVAL),
+                        "before": eval_scores(result, BEFORE_EVAL),
+                    }
+                )
+                print(f"[embodied] {source.name} {' '.join(overrides)}: {rows[-1]['final']}")
+        overrides = growth_overrides(GROWTH_FACTOR, GROWTH_START_FRACTION)
+        result = replay(source, overrides)
+        start = round(GROWTH_START_FRACTION * int(cfg.train.presentations))
+        growth.append(
+            {
+                **base,
+                "overrides": overrides,
+                "growth_presentation": start,
+                "online": recovery(result["online"], start),
+                "final": eval_scores(result, FINAL_EVAL),
+                "before": eval_scores(result, BEFORE_EVAL),
+            }
+        )
+        print(f"[embodied] {source.name} growth: {growth[-1]['online']['before_pct']:.2f} %")
+    return {"rows": rows, "growth": growth}
+
+
+def _mean_sd(values: Sequence[float]) -> str:
+    if not values:
+        return "—"
+    sd = statistics.stdev(values) if len(values) > 1 else 0.0
+    return f"{statistics.fmean(values):.3f} ± {sd:.3f}"
+
+
+def table(results: dict) -> str:
+    """The walk fraction × slip table (final models, held-out photographs), as Markdown."""
+    rows = results["rows"]
+    supervised = {r["seed"]: r["final"] for r in rows if r["targets"] == "supervisor"}
+    seeds = sorted(supervised)
+    trials = sorted({(r["final"]["trials"], r["final"]["distances"]) for r in rows if r["final"]})
+    lines = [
+        "Held-out photographs, "
+        + ", ".join(f"{n} trials at {k} distances" for n, k in trials)
+        + " per model, "
+        f"{len(seeds)} seeds; error in metres: mean ± sd over seeds (ratio to the supervised "
+        "learner on the same eye movements).",
+        "",
+        "| walked | " + " | ".join(f"slip {s:.0%}" for s in SLIPS) + " |",
+        "|---|" + "---|" * len(SLIPS),
+    ]
+    base = [supervised[s]["mae_m"] for s in seeds if supervised[s]]
+    lines.append(f"| supervisor | {_mean_sd(base)} m |" + " |" * (len(SLIPS) - 1))
+    for fraction in FRACTIONS:
+        cells = []
+        for slip in SLIPS:
+            got = [
+                r
+                for r in rows
+                if r["targets"] == "odometry"
+                and r["walk_fraction"] == fraction
+                and r["stride_slip"] == slip
+                and r["final"]
+            ]
+            errors = [r["final"]["mae_m"] for r in got]
+            ratios = [r["final"]["mae_m"] / supervised[r["seed"]]["mae_m"] for r in got]
+            cells.append(f"{_mean_sd(errors)} m ({statistics.fmean(ratios):.2f}×)" if got else "—")
+        lines.append(f"| {fraction:.0%} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def growth_table(results: dict) -> str:
+    lines = [
+        "| seed | online error before (%) | peak after (%) | at the end (%) | presentations to "
+        f"recover (≤ {RECOVERED}× before) | held-out before (%) | held-out after (%) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for g in results["growth"]:
+        o = g["online"]
+        recovered = o["presentations_to_recover"]
+        lines.append(
+            f"| {g['seed']} | {o['before_pct']:.2f} | {o['peak_pct']:.2f} | {o['end_pct']:.2f} | "
+            f"{'not within the run' if recovered is None else recovered} | "
+            f"{(g['before'] or {}).get('total_pct', float('nan')):.2f} | "
+            f"{(g['final'] or {}).get('total_pct', float('nan')):.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def recovery_figure(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for g in results["growth"]:
+        curve = g["online"]["curve"]
+        p, e = np.array(curve["presentation"]), np.array(curve["error_pct"])
+        if e.size >= ROLLING:
+            smooth = np.convolve(e, np.ones(ROLLING) / ROLLING, mode="valid")
+            ax.plot(p[ROLLING - 1 :], smooth, label=f"seed {g['seed']}")
+        ax.axvline(g["growth_presentation"], color="grey", linestyle="--", linewidth=0.8)
+    ax.set_xlabel("presentation")
+    ax.set_ylabel(f"online error, body units (%, mean of {ROLLING})")
+    ax.set_title(f"stride × {GROWTH_FACTOR:g} at the dashed line; nominal stride unchanged")
+    if results["growth"]:
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.tools.analysis.embodied", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("sources", nargs="+", help="finished supervised runs (or their folders)")
+    parser.add_argument("--out", required=True, help="folder for embodied.json and the figure")
+    args = parser.parse_args(argv)
+    try:
+        sources = find_sources(args.sources)
+        results = study(sources)
+    except (ReplayError, FileNotFoundError, ValueError) as exc:
+        print(f"embodied: error: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "embodied.json").write_text(json.dumps(results, indent=2) + "\n")
+    recovery_figure(results, out / "growth_recovery.png")
+    print(table(results))
+    print()
+    print(growth_table(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
