@@ -1,5 +1,6 @@
 """The experiment files are the record of every result: the paper's algorithm as written
-(conf/experiment/paper_*.yaml) and our recipe (recipe_*.yaml, quickstart.yaml)."""
+(conf/experiment/paper_*.yaml), our recipe (recipe_*.yaml, quickstart.yaml) and, beyond the
+paper, distance from the robot's own body (embodied_*.yaml)."""
 
 from pathlib import Path
 
@@ -35,6 +36,7 @@ def test_every_setup_has_both_families_and_nothing_else():
         [f"paper_{s}" for s in SETUPS]
         + [f"recipe_{s}" for s in SETUPS]
         + ["paper_algorithm", "quickstart"]
+        + ["embodied_multi_5_20_weighted", "embodied_growth"]
     )
     assert names == expected
 
@@ -120,16 +122,20 @@ def test_the_committed_models_are_reproduced_by_one_experiment_name(run):
     assert differ == {}
 
 
-@pytest.mark.parametrize("name", ["paper_multi_5_20_weighted", "recipe_multi_5_20_weighted"])
+@pytest.mark.parametrize(
+    "name", ["paper_multi_5_20_weighted", "recipe_multi_5_20_weighted", "embodied_growth"]
+)
 def test_each_family_trains_and_resumes_exactly(name, tmp_path, tiny_overrides):
     """Shrunk like the other tests' runs, each family trains; stopped and resumed, it gives the
-    numbers of an uninterrupted run, across §5's perturbation."""
+    numbers of an uninterrupted run, across §5's perturbation (and the growth spurt)."""
     from parallax.trainer import Trainer
 
     overrides = [f"experiment={name}", *tiny_overrides, "env.stimuli.count=6"]
     overrides = [o for o in overrides if not o.startswith("curriculum.lateral_positions")]
     # 0.2 of 4 and of 6 presentations both round to 1: the stop changes no setting
     overrides += ["curriculum.lateral_positions=[0.05,0.1]", "perturbation.start_fraction=0.2"]
+    if name == "embodied_growth":  # 0.4 of 4 and of 6 both round to 2: the spurt's presentation
+        overrides += ["env.walk.growth_start_fraction=0.4", "distance.fit_from=2"]
 
     def train(run_dir, presentations):
         trainer = Trainer(compose(overrides + [f"train.presentations={presentations}"]), run_dir)

@@ -125,10 +125,15 @@ RESULT_NEUTRAL_KEYS = frozenset(
     {"device", "resume", "train.threads", "train.checkpoint_every", "train.image_every"}
 )
 #: Settings that may differ when a run is resumed: those, and train.presentations (which only
-#: changes how long the run goes on). perturbation.start_fraction may differ too, so long as the
-#: presentation it starts at (with train.presentations, :func:`perturbation_start`) does not: a
-#: finished run's continuation after the perturbation is lengthened with both.
-RESUMABLE_CHANGES = RESULT_NEUTRAL_KEYS | {"train.presentations", "perturbation.start_fraction"}
+#: changes how long the run goes on). perturbation.start_fraction and
+#: env.walk.growth_start_fraction may differ too, so long as the presentation they start at
+#: (with train.presentations: :func:`perturbation_start`, :func:`growth_start`) does not: a
+#: finished run's continuation is lengthened with both.
+RESUMABLE_CHANGES = RESULT_NEUTRAL_KEYS | {
+    "train.presentations",
+    "perturbation.start_fraction",
+    "env.walk.growth_start_fraction",
+}
 
 
 def freeze_value(value: Any) -> Any:
@@ -177,6 +182,12 @@ def changed_settings(saved: DictConfig, current: DictConfig) -> list[str]:
             "the perturbation's start presentation (perturbation.start_fraction × "
             f"train.presentations): {start_before} → {start_after}"
         )
+    growth_before, growth_after = growth_start(saved_dict), growth_start(current_dict)
+    if growth_before != growth_after:
+        changes.append(
+            "the growth spurt's presentation (env.walk.growth_start_fraction × "
+            f"train.presentations): {growth_before} → {growth_after}"
+        )
     return changes
 
 
@@ -196,7 +207,7 @@ def perturbation_start(cfg) -> int | None:
 def growth_start(cfg) -> int | None:
     """Presentation index from which the body's grown stride is used (None: never): the one place
     ``env.walk.growth_start_fraction`` becomes a presentation (the trainer and parallax-replay)."""
-    fraction = cfg["env"]["walk"]["growth_start_fraction"]
+    fraction = cfg["env"]["walk"]["growth_start_fraction"]  # a DictConfig or a plain dict
     if fraction is None:
         return None
     return int(round(float(fraction) * int(cfg["train"]["presentations"])))

@@ -307,7 +307,13 @@ def _walk(check: _Checks) -> None:
     check.number("env.walk.stride_slip", at_least=0, below=0.5)
     check.integer("env.walk.substeps", 1)
     check.number("env.walk.growth_factor", above=0)
-    check.optional_number("env.walk.growth_start_fraction", at_least=0, at_most=1)
+    start = check.optional_number("env.walk.growth_start_fraction", at_least=0, at_most=1)
+    if start is not None and check.get("distance.targets") != "odometry":
+        check.fail(
+            "env.walk.growth_start_fraction",
+            start,
+            "a growth spurt needs walks: set distance.targets=odometry, or leave it null",
+        )
 
 
 def _curriculum(check: _Checks) -> None:
