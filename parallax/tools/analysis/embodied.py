@@ -259,10 +259,47 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / "embodied.json").write_text(json.dumps(results, indent=2) + "\n")
     recovery_figure(results, out / "growth_recovery.png")
-    print(table(results))
-    print()
-    print(growth_table(results))
+    report = report_text(results, argv if argv is not None else sys.argv[1:])
+    (out / "README.md").write_text(report)
+    print(report)
     return 0
+
+
+def report_text(results: dict, argv: Sequence[str]) -> str:
+    """The results page: both tables, the figure, and the commands behind them."""
+    sources = sorted({r["source"] for r in results["rows"]})
+    return "\n".join(
+        [
+            "# Distance from the robot's own body: results",
+            "",
+            "Written by `python -m parallax.tools.analysis.embodied "
+            + " ".join(argv)
+            + "` from the supervised runs",
+            *[f"- `{s}`" for s in sources],
+            "",
+            "each trained by `parallax-train experiment=recipe_multi_5_20_weighted seed=N` and "
+            "evaluated by `parallax-eval RUN` and `parallax-eval RUN --checkpoint "
+            "checkpoint_before_perturbation.pt --out RUN/eval_before`. Every cell is "
+            "`parallax-replay RUN` with the overrides in embodied.json. What the odometry "
+            "learner is scored against is the slip-free walk to touch (docs/embodied.md).",
+            "",
+            "## Walk fraction × stride slip (the models at the end of the run)",
+            "",
+            table(results),
+            "",
+            f"## Growth spurt (stride × {GROWTH_FACTOR:g} at {GROWTH_START_FRACTION:.0%} of the "
+            "run)",
+            "",
+            "Errors in body units: the estimate against the strides the grown body needs, "
+            "× the nominal stride. Held-out before: the model at §5's perturbation (before the "
+            "spurt); after: at the end.",
+            "",
+            growth_table(results),
+            "",
+            "![online error around the spurt](growth_recovery.png)",
+            "",
+        ]
+    )
 
 
 if __name__ == "__main__":

@@ -2,18 +2,22 @@
 
 Median milliseconds of: one 256×256 left-eye frame alone (``physics.render_left_eye``), one
 ``env.step`` (turn the eye, render, solve α*, build the observation), one reset (new texture and
-distance, I0, first image), the target-pan solver, a blurred frame (§5), and building one more
-environment; plus the resident memory each extra environment costs. Target: a frame ≤ 2 ms on a
-2-core CPU without GPU.
+distance, I0, first image), the target-pan solver, a blurred frame (§5), the walk to a panel at
+10 m and back (the odometry targets' walk, parallax.envs.walk, the farthest of the grid), and
+building one more environment; plus the resident memory each extra environment costs. Target:
+a frame ≤ 2 ms on a 2-core CPU without GPU.
 """
 
 from __future__ import annotations
 
 import os
 import time
+from dataclasses import asdict
 
 import numpy as np
 
+from parallax.config.schema import WalkConfig
+from parallax.envs.walk import Walker
 from parallax.tools.bench.timing import interleaved_medians_ms
 
 
@@ -44,12 +48,19 @@ def run(repeats: int = 50, image_size: int = 256) -> dict[str, float]:
 
     blurred = parallax.envs.load(seed=0, blur_sigma=2.0, **options)
     blurred.reset()
+    far = parallax.envs.load(seed=0, **options)
+    far.reset()
+    far.physics.set_stimulus(far.physics.texture_index(), 10.0)
+    body = asdict(WalkConfig())  # the schema's body (env.walk)
+    body.pop("growth_start_fraction")
+    walker = Walker(seed=0, **body)
     results = interleaved_medians_ms(
         {
             "render_left_eye_ms": physics.render_left_eye,
             "env_step_ms": step,
             "target_pan_ms": physics.target_pan_deg,
             "render_left_eye_blur2_ms": blurred.physics.render_left_eye,
+            "walk_to_10m_ms": lambda: walker.walk(far.physics),
         },
         repeats,
     )
@@ -57,6 +68,7 @@ def run(repeats: int = 50, image_size: int = 256) -> dict[str, float]:
         interleaved_medians_ms({"env_reset_ms": env.reset}, max(5, repeats // 5), warmup=2)
     )
     blurred.close()
+    far.close()
 
     extra, before = [], _resident_mb()
     start = time.perf_counter()
