@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import parallax.envs
-from parallax.envs.walk import HAND_GEOM, PANEL_GEOM, Walk, Walker, walk_robots
+from parallax.envs.walk import HAND_GEOM, PANEL_GEOM, Walker, walk_robots
 
 STRIDE_M = 0.05
 SUBSTEPS = 10
@@ -134,7 +134,8 @@ def test_moving_the_panel_geom_changes_the_walk_but_not_the_scene_distance(at_3m
 
 def test_a_panel_out_of_reach_is_an_error_and_the_body_is_put_back(physics):
     w = walker(stride_m=1.0)  # few strides to the 100 m query range
-    texture, distance, lateral = physics.texture_index(), physics.distance(), physics.lateral_position()
+    texture, distance = physics.texture_index(), physics.distance()
+    lateral = physics.lateral_position()
     try:
         physics.set_lateral_position(0.1)
         physics.set_stimulus(texture, 150.0)
@@ -149,7 +150,7 @@ def test_a_panel_out_of_reach_is_an_error_and_the_body_is_put_back(physics):
         np.testing.assert_array_equal(after[key], value, err_msg=key)
 
 
-# -- the body is put back ---------------------------------------------------------------------------
+# -- the body is put back -------------------------------------------------------------------------
 @pytest.mark.parametrize("lateral_m", [0.05, 0.1])
 def test_the_body_is_restored_exactly_after_a_walk(at_3m, lateral_m):
     at_3m.set_lateral_position(lateral_m)
@@ -287,10 +288,6 @@ def test_walk_robots_counts_only_the_robots_that_walked(at_3m):
 def test_walk_robots_needs_one_walker_per_robot(at_3m):
     with pytest.raises(ValueError):
         walk_robots([at_3m, at_3m], [walker()], 1.0)
-
-
-def test_a_walk_is_a_value():
-    assert Walk(strides=2.5, travelled_m=0.125) == Walk(strides=2.5, travelled_m=0.125)
 
 
 # -- arguments -------------------------------------------------------------------------------------
