@@ -81,16 +81,22 @@ class DistanceErrorTracker:
         self.window = int(window)
         self.pairs: deque[tuple[float, float]] = deque(maxlen=self.window)
 
-    def record(self, predicted_m: float, true_m: float) -> None:
-        self.pairs.append((float(predicted_m), float(true_m)))
+    def record(self, predicted_m: float, true_m: float, at_m: float | None = None) -> None:
+        """A prediction and its truth; ``at_m``: the panel's distance when the truth is in
+        another unit (odometry's), for the ranges."""
+        pair = (float(predicted_m), float(true_m))
+        self.pairs.append(pair if at_m is None else (*pair, float(at_m)))
 
     def by_range(self) -> dict[str, float]:
+        """Errors by range of the panels' distances, as parallax-eval's."""
         from parallax.distance.metrics import distance_error_by_range
 
         if not self.pairs:
             return {}
-        pred, true = np.asarray(self.pairs, dtype=np.float64).T
-        return distance_error_by_range(pred, true)
+        pred = np.array([p[0] for p in self.pairs], dtype=np.float64)
+        true = np.array([p[1] for p in self.pairs], dtype=np.float64)
+        at = np.array([p[-1] for p in self.pairs], dtype=np.float64)  # the truth if no panel
+        return distance_error_by_range(pred, true, at=at)
 
     def state_dict(self) -> dict:
         return {"pairs": list(self.pairs)}
@@ -105,6 +111,8 @@ def learn_online(
     pans: np.ndarray,
     truths: np.ndarray,
     readings: Sequence[float | None] | None = None,
+    *,
+    distances: np.ndarray | None = None,
 ) -> dict[str, float]:
     """Paper §3.5 online: predict each new s before learning it (the honest online error against
     ``truths``, kept by `tracker`), then queue it with its target (eq. 9) and fit. The rows of
@@ -112,15 +120,17 @@ def learn_online(
     fitted once (with one robot, exactly the paper's loop; see
     ``DistanceLearner.observe_batch``). ``readings`` are what the target source makes targets
     from (default: ``truths``, the supervisor's distances); a None reading (a robot that did not
-    walk) is predicted but not learnt. Returns the fit's statistics ({} if none). Shared by the
+    walk) is predicted but not learnt; ``distances``, the panels' (when the truths are in another
+    unit), place the errors in the ranges. Returns the fit's statistics ({} if none). Shared by the
     trainer and parallax-replay so that a replay is the run's distance learner."""
     pans = np.atleast_2d(np.asarray(pans, dtype=np.float64))
     truths = np.asarray(truths, dtype=np.float64).reshape(-1)
     readings = list(truths) if readings is None else list(readings)
+    at = [None] * len(truths) if distances is None else np.asarray(distances).reshape(-1)
     if learner.is_ready:
         predictions = np.asarray(learner.predict(pans), dtype=np.float64).reshape(-1)
-        for predicted, truth in zip(predictions, truths):
-            tracker.record(float(predicted), float(truth))
+        for predicted, truth, panel in zip(predictions, truths, at):
+            tracker.record(float(predicted), float(truth), None if panel is None else float(panel))
     labelled = [i for i, reading in enumerate(readings) if reading is not None]
     if not labelled:
         return {}

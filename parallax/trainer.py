@@ -129,7 +129,9 @@ class Trainer:
                 ],
                 "true_stride_m": stride,
             }
-            stats = learn_online(self.exp.distance, self.dist, pans, truths, counted)
+            stats = learn_online(
+                self.exp.distance, self.dist, pans, truths, counted, distances=pres.distances
+            )
         else:
             stats = learn_online(self.exp.distance, self.dist, pans, pres.distances)
         if stats:

@@ -155,25 +155,20 @@ def test_the_online_error_is_scored_against_the_slip_free_walk(walking_run):
     pairs = checkpoint.load(walking_run / "checkpoint.pt")["dist"]["pairs"]
     predicted = [r for r in records if r["learnt_distance"]][-len(pairs) :]
     assert len(pairs) == sum(1 for r in records if r["distance_error"])
-    truths = [t for _, t in pairs]
+    truths = [pair[1] for pair in pairs]
     assert truths == pytest.approx([r["reach_strides"][0] * 0.05 for r in predicted], rel=1e-12)
-    estimates = [p for p, _ in pairs]
+    # each pair also holds the panel's distance, for the ranges
+    assert [pair[2] for pair in pairs] == [r["distances"][0] for r in predicted]
+    estimates = [pair[0] for pair in pairs]
     total = _summary(walking_run)["distance_error"]["total"]
     assert total == pytest.approx(distance_error_by_range(estimates, truths)["total"])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the online tracker bins the odometry errors by the truth in the robot's unit "
-    "(reach × nominal stride: the panel less the hand's reach, /1.1 after the spurt), not by "
-    "the panel's distance as parallax-eval does (distance_error_by_range(..., at=distances)); "
-    "a 5.3 m panel is counted in the 3-4.9 m range",
-)
 def test_the_online_ranges_are_the_panels_distances_as_in_parallax_eval(walking_run):
     records = _records(walking_run)
     pairs = checkpoint.load(walking_run / "checkpoint.pt")["dist"]["pairs"]
     predicted = [r for r in records if r["learnt_distance"]][-len(pairs) :]
-    estimates, truths = [p for p, _ in pairs], [t for _, t in pairs]
+    estimates, truths = [pair[0] for pair in pairs], [pair[1] for pair in pairs]
     panels = [r["distances"][0] for r in predicted]
     expected = distance_error_by_range(estimates, truths, at=panels)
     assert json.dumps(_summary(walking_run)["distance_error"]) == json.dumps(expected)
@@ -231,13 +226,6 @@ def test_replay_takes_walk_overrides_only(supervised_run, tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="Walker.reach_strides(physics, d) adds d − physics.distance() to the gap, so the "
-    "truth for a panel at d depends in its last bits on where the world's panel stands: "
-    "parallax-eval (Experiment.distance_truths) and parallax-replay (_Body.truths) have it in "
-    "different places, and the replayed evals of a walking run are not bit-identical",
-)
 def test_replay_of_a_walking_run_rescores_its_eval_unchanged(walking_run, tmp_path):
     from parallax.tools.evaluate import evaluate
 

@@ -88,12 +88,18 @@ class Walker:
         return float(mujoco.mj_geomDistance(model, data, hand, panel, QUERY_RANGE_M, None))
 
     def reach_strides(self, physics: Physics, distance_m: float | None = None) -> float:
-        """How many of its present true strides the body needs from l0 to touch the panel (or a
-        panel moved to ``distance_m``: the gap changes by as much), with no slip: the yardstick
-        of the odometry's errors (never shown to the robot)."""
-        gap = self._at_l0(physics, lambda: self.gap_m(physics))
-        if distance_m is not None:
-            gap += float(distance_m) - physics.distance()
+        """How many of its present true strides the body needs from l0 to touch the panel (or the
+        panel put at ``distance_m``), with no slip: the yardstick of the odometry's errors (never
+        shown to the robot)."""
+        if distance_m is None or float(distance_m) == physics.distance():
+            gap = self._at_l0(physics, lambda: self.gap_m(physics))
+        else:  # the panel moved there and back: the same bits wherever it stood
+            texture, distance = physics.texture_index(), physics.distance()
+            physics.set_stimulus(texture, float(distance_m))
+            try:
+                gap = self._at_l0(physics, lambda: self.gap_m(physics))
+            finally:
+                physics.set_stimulus(texture, distance)
         return gap / self.true_stride_m
 
     def walk(self, physics: Physics) -> Walk:

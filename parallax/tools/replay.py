@@ -163,7 +163,10 @@ def replay(
             truths, readings = record["distances"], None
             if body is not None:
                 truths, readings = body.walk(learner.target_source, record["distances"])
-            last_stats = learn_online(learner, tracker, record[key], truths, readings) or last_stats
+            stats = learn_online(
+                learner, tracker, record[key], truths, readings, distances=record["distances"]
+            )
+            last_stats = stats or last_stats
     cut = until_perturbation and summary.get("before_perturbation") is not None
     truths = {
         "before": None if body is None else functools.partial(body.truths, grown=before_grown),
@@ -216,8 +219,8 @@ class _OnlineHistory(DistanceErrorTracker):
         self.presentation = 0
         self.history: list[tuple[int, float, float]] = []
 
-    def record(self, predicted_m: float, true_m: float) -> None:
-        super().record(predicted_m, true_m)
+    def record(self, predicted_m: float, true_m: float, at_m: float | None = None) -> None:
+        super().record(predicted_m, true_m, at_m)
         self.history.append((self.presentation, float(predicted_m), float(true_m)))
 
 
