@@ -1,0 +1,231 @@
+"""How far must the robot move? The movement planner (paper §7's first future work) on the eye
+movements of finished runs.
+
+Every trial starts from pan 0 at its own lateral position (§3.2), so a run that swept the whole
+list L every presentation also shows what a robot that visited only some positions, in any
+order, would have seen. This module gives the planner of :mod:`parallax.distance.planner` the
+queue a finished run's distance learner ended with (its last c full sweeps, with the supervisor's
+distances), then lets it choose, for each held-out presentation of the run's parallax-eval, where
+to move and when to stop. It sees only the pans of the positions it visits. For each price it
+reports the distance error against the eye movements (trials × t_h) and the lateral travel per
+presentation. The fixed lists 5–10 and 5–20 cm are points on the same axes: the estimator of
+their positions, and the run's own network (parallax-eval's error).
+
+The eye here learnt from full sweeps; a robot that plans while it learns visits the far
+positions less often, and its eye there may learn more slowly.
+
+    python -m parallax.tools.analysis.movement RUN_OR_MULTIRUN… --out DIR
+        [--prices 0 0.05 0.1 0.2 0.5 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from parallax.config import READOUT_PANS, distance_readout, load_run_config
+from parallax.distance.planner import MovementPlanner
+from parallax.metrics import position_label
+from parallax.tools.replay import ReplayError, find_sources, read_stream
+
+PRICES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
+EVAL = "eval.json"
+
+
+def planner_of(run_dir: Path, price_per_trial: float = 0.0) -> tuple[MovementPlanner, dict]:
+    """A planner with the queue the run's distance learner ended with, and the run's config."""
+    cfg = load_run_config(run_dir)
+    lateral = [float(l) for l in cfg.curriculum.lateral_positions]
+    planner = MovementPlanner(
+        lateral, queue_size=int(cfg.distance.queue_size), price_per_trial=price_per_trial
+    )
+    key = READOUT_PANS[distance_readout(cfg)]
+    learnt = [r for r in read_stream(run_dir) if r["learnt_distance"]]
+    for record in learnt[-planner.queue_size :]:
+        for s, d in zip(record[key], record["distances"]):
+            planner.observe(s, d)
+    return planner, cfg
+
+
+def held_out(run_dir: Path) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The greedy eye's vectors s and distances of the run's parallax-eval, and the eval."""
+    path = run_dir / EVAL
+    if not path.is_file():
+        raise ReplayError(f"{run_dir} has no {EVAL}: run parallax-eval on it first")
+    result = json.loads(path.read_text())
+    grid = result["greedy_samples"]["grid"]
+    return np.asarray(grid["pans"], dtype=np.float64), np.asarray(grid["distances"]), result
+
+
+def curve(run_dir: Path, prices: Sequence[float]) -> dict:
+    """One run: the planner at each price, and the fixed lists, on its held-out presentations."""
+    planner, cfg = planner_of(run_dir)
+    pans, distances, evaluation = held_out(run_dir)
+    trial_length = int(cfg.env.trial_length)
+    lateral_cm = [100.0 * l for l in planner.lateral_positions]
+    points = []
+    for price in prices:
+        planner.price_per_trial = float(price)
+        routes, errors = [], []
+        for s, d in zip(pans, distances):
+            visited, estimate = planner.plan(s)
+            routes.append(visited)
+            errors.append(100.0 * abs(estimate - d) / d)
+        points.append(
+            {
+                "price_per_trial": float(price),
+                "error_pct": float(np.mean(errors)),
+                "eye_movements": float(np.mean([len(v) for v in routes])) * trial_length,
+                "travel_cm": float(np.mean([2 * max(lateral_cm[k] for k in v) for v in routes])),
+                "trials_by_distance": _by_distance(distances, [len(v) for v in routes]),
+                "farthest_cm_by_distance": _by_distance(
+                    distances, [max(lateral_cm[k] for k in v) for v in routes]
+                ),
+                "first_positions_cm": sorted(
+                    {position_label(planner.lateral_positions[v[0]]) for v in routes}
+                ),
+            }
+        )
+    fixed = {}
+    for name, upto in (("5-10", 0.10), ("5-20", 0.20)):
+        chosen = [k for k, l in enumerate(planner.lateral_positions) if l <= upto + 1e-9]
+        if len(chosen) < 2:
+            continue
+        estimates = [planner.estimate(chosen, s[chosen]) for s in pans]
+        fixed[name] = {
+            "error_pct": float(np.mean(np.abs(np.array(estimates) - distances) / distances) * 100),
+            "eye_movements": float(len(chosen) * trial_length),
+            "travel_cm": 2 * max(lateral_cm[k] for k in chosen),
+        }
+    network = (evaluation.get("distance") or {}).get("by_range", {}).get("total")
+    return {
+        "source": str(run_dir),
+        "seed": int(cfg.seed),
+        "trials": int(distances.size),
+        "queue": planner.queue_size,
+        "planner": points,
+        "fixed_estimator": fixed,
+        "network_error_pct": network,
+    }
+
+
+def _by_distance(distances: np.ndarray, values: Sequence[float]) -> dict[str, float]:
+    values = np.asarray(values, dtype=np.float64)
+    return {f"{d:.2f}": float(values[distances == d].mean()) for d in np.unique(distances)}
+
+
+def table(results: list[dict]) -> str:
+    """Mean ± sd over runs: error, eye movements and travel per presentation at each price."""
+
+    def spread(values: list[float], digits: int = 2) -> str:
+        sd = statistics.stdev(values) if len(values) > 1 else 0.0
+        return f"{statistics.fmean(values):.{digits}f} ± {sd:.{digits}f}"
+
+    trials = sorted({r["trials"] for r in results})
+    lines = [
+        f"{len(results)} runs, {', '.join(map(str, trials))} held-out presentations each; "
+        "mean ± sd over runs.",
+        "",
+        "| route | price per trial (points of %) | distance error (%) | eye movements | "
+        "lateral travel (cm) |",
+        "|---|---|---|---|---|",
+    ]
+    for i, point in enumerate(results[0]["planner"]):
+        rows = [r["planner"][i] for r in results]
+        lines.append(
+            f"| planned | {point['price_per_trial']:g} | {spread([p['error_pct'] for p in rows])} "
+            f"| {spread([p['eye_movements'] for p in rows], 0)} | "
+            f"{spread([p['travel_cm'] for p in rows], 0)} |"
+        )
+    for name in results[0]["fixed_estimator"]:
+        rows = [r["fixed_estimator"][name] for r in results]
+        lines.append(
+            f"| fixed {name} cm, the planner's estimator | — | "
+            f"{spread([p['error_pct'] for p in rows])} | {rows[0]['eye_movements']:.0f} | "
+            f"{rows[0]['travel_cm']:.0f} |"
+        )
+    networks = [r["network_error_pct"] for r in results if r["network_error_pct"] is not None]
+    if networks:
+        last = results[0]["fixed_estimator"].get("5-20", {})
+        movements, travel = last.get("eye_movements", math.nan), last.get("travel_cm", math.nan)
+        lines.append(
+            f"| fixed 5-20 cm, the run's network (parallax-eval) | — | {spread(networks)} | "
+            f"{movements:.0f} | {travel:.0f} |"
+        )
+    return "\n".join(lines)
+
+
+def figures(results: list[dict], out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for axis, key, label in (
+        (axes[0], "eye_movements", "eye movements per presentation"),
+        (axes[1], "travel_cm", "lateral travel per presentation (cm)"),
+    ):
+        for r in results:
+            xs = [p[key] for p in r["planner"]]
+            ys = [p["error_pct"] for p in r["planner"]]
+            axis.plot(xs, ys, marker="o", label=f"planned, seed {r['seed']}")
+            for name, point in r["fixed_estimator"].items():
+                axis.scatter(point[key], point["error_pct"], marker="s", color="k")
+                axis.annotate(f"fixed {name} cm", (point[key], point["error_pct"]), fontsize=7)
+        axis.set_xlabel(label)
+        axis.set_ylabel("distance error (%)")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "error_vs_movement.png", dpi=120)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for r in results:
+        for point in r["planner"]:
+            if point["price_per_trial"] not in (0.05, 0.2):
+                continue
+            by = point["trials_by_distance"]
+            ax.plot(
+                [float(d) for d in by],
+                list(by.values()),
+                label=f"price {point['price_per_trial']:g}, seed {r['seed']}",
+            )
+    ax.set_xlabel("distance (m)")
+    ax.set_ylabel("positions visited before stopping")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "stops_by_distance.png", dpi=120)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.tools.analysis.movement", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("sources", nargs="+", help="finished runs with parallax-eval results")
+    parser.add_argument("--out", required=True, help="folder for movement.json and figures")
+    parser.add_argument("--prices", nargs="+", type=float, default=list(PRICES))
+    args = parser.parse_args(argv)
+    try:
+        results = [curve(source, args.prices) for source in find_sources(args.sources)]
+    except (ReplayError, FileNotFoundError, ValueError) as exc:
+        print(f"movement: error: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "movement.json").write_text(json.dumps(results, indent=2) + "\n")
+    figures(results, out)
+    print(table(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
