@@ -14,6 +14,7 @@ and `parallax.tools.evaluate` the frozen measurements.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -25,6 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 
 import parallax.envs
 from parallax.coding import CoderOutput
+from parallax.distance.planner import MovementPlanner
 from parallax.envs.walk import Walker, walk_robots
 from parallax.lockstep import Lockstep, stack_images
 from parallax.metrics import position_label
@@ -48,6 +50,9 @@ class Presentation:
     policy_stats: dict[str, float] = field(default_factory=dict)
     last_view: np.ndarray | None = None  # robot 0's I0 beside its last image (for TensorBoard)
     start_pans: np.ndarray | None = None  # (B, r) pan at the first iteration of each trial (deg)
+    # beyond the paper (§7): the positions of L a robot chose to visit, in order (indices into
+    # L; the other positions' pans are NaN); None when it swept the whole list
+    route: list[int] | None = None
 
     @property
     def labels(self) -> list[str]:
@@ -140,6 +145,19 @@ class Experiment:
         if hasattr(self.distance, "to"):  # DistanceLearner.to, or an nn.Module
             self.distance.to(self.device)
         self.walkers = body_walkers(cfg)
+        # beyond the paper (§7): the robot plans its route; its own stream decides when it
+        # sweeps all of L instead, from the run's seed after the walkers'
+        self.planner: MovementPlanner | None = None
+        if cfg.movement.route == "planned":
+            self.planner = MovementPlanner(
+                self.lateral_positions,
+                queue_size=int(cfg.distance.queue_size),
+                price_per_trial=float(cfg.movement.price_per_trial),
+                price_per_cm=float(cfg.movement.price_per_cm),
+            )
+        self.explore_random = np.random.RandomState(
+            seeds_for(cfg.seed, self.robots + 5)[self.robots + 4] % 2**32
+        )
         self.stage = 0
 
     # --- curriculum and perturbation -------------------------------------------------------
@@ -190,6 +208,27 @@ class Experiment:
             dtype=np.float64,
         )
 
+    def sweeps(self, explore: float) -> bool:
+        """Whether this presentation sweeps all of L: always without a planner or before its
+        queue is full, else with probability ``explore`` (drawn whenever there is a planner)."""
+        if self.planner is None:
+            return True
+        draw = self.explore_random.random_sample()
+        return not self.planner.is_ready or draw < explore
+
+    def planned_route(self, readout_key: str) -> Callable[[list[int], Presentation], int | None]:
+        """The planner as the ``route`` of :meth:`run_presentation`, reading s as
+        ``readout_key`` (the Presentation field of train.distance_readout)."""
+        planner = self.planner
+        if planner is None:
+            raise RuntimeError("no planner: movement.route is list")
+
+        def choose(visited: list[int], so_far: Presentation) -> int | None:
+            pans = getattr(so_far, readout_key)[0]
+            return planner.next_position(visited, pans[visited])
+
+        return choose
+
     def set_growth(self, grown: bool) -> None:
         """The bodies' strides before or after the growth spurt of env.walk."""
         for walker in self.walkers:
@@ -197,7 +236,11 @@ class Experiment:
 
     # --- one presentation: the paper's loop -----------------------------------------------
     def run_presentation(
-        self, learn: bool = True, greedy: bool = False, keep_view: bool = False
+        self,
+        learn: bool = True,
+        greedy: bool = False,
+        keep_view: bool = False,
+        route: Callable[[list[int], Presentation], int | None] | None = None,
     ) -> Presentation:
         """All robots live through one presentation (paper §3.2, Fig. 3); learning on or frozen.
 
@@ -205,16 +248,31 @@ class Experiment:
         learns from the step into them and acts, and the dictionaries take their step. A
         :class:`~parallax.lockstep.Lockstep` runs the worlds and the dictionary step on other
         threads meanwhile; every number is that of the plain sequence.
+
+        ``route`` (one robot; beyond the paper, §7): instead of sweeping L, the robot asks
+        ``route(visited, so_far)`` for the index into L of each next position — before the
+        first trial, then at the end of each — with the positions visited so far and the
+        presentation as it stands; None stops it there.
         """
         learn_dictionaries = learn and self.coder.learn
         lateral = list(self.envs[0].task.lateral_positions)
-        tally = _Tally(self.robots, lateral, self.trial_length)
+        tally = _Tally(self.robots, lateral, self.trial_length, routed=route is not None)
+        if route is not None:
+            if self.robots != 1:
+                raise ValueError(f"a chosen route needs env.robots=1, got {self.robots}")
+            first = route([], tally.presentation(None, False))
+            if first is None:
+                raise ValueError("a route must visit at least one lateral position")
+            self.envs[0].task.start_route(lateral[first])
+        index_of = {l: k for k, l in enumerate(lateral)}
         valid = torch.ones(self.robots, dtype=torch.bool, device=self.device)  # every robot learns
         reference_theta = previous = None
         with Lockstep(self.envs, self.coder) as world:
             obs, out, last = world.reset()  # every robot's stimulus: I0 cached, I(0) encoded
             while True:
                 iteration, p = int(obs[0]["iteration"]), int(obs[0]["position_index"])
+                if route is not None:  # the episode's p-th position is this one of L
+                    p = index_of[float(obs[0]["lateral_position"])]
                 if iteration == 0:  # a new trial: the step into it crossed a reset, not learnt
                     previous = None
                     if self.policy.uses_reference_state:  # with the dictionaries of these frames
@@ -226,7 +284,7 @@ class Experiment:
                     world.start_dictionary_step()
                 pans = np.array([float(o["pan"]) for o in obs])
                 rewards = out.reward.cpu().numpy().astype(np.float64)
-                tally.encoded(obs, out, pans, rewards)
+                tally.encoded(obs, out, pans, rewards, p)
                 change = (
                     None if previous is None else (rewards, previous.rewards, previous.increments)
                 )
@@ -236,6 +294,14 @@ class Experiment:
                     tally.updated(self.policy.update(*transition))
                 if last:
                     break
+                if route is not None and iteration == self.trial_length - 1:
+                    tally.visited.append(p)
+                    chosen = route(list(tally.visited), tally.presentation(obs, False))
+                    if chosen is None:
+                        break
+                    if chosen in tally.visited:
+                        raise ValueError(f"the route visits position {chosen} of L twice")
+                    self.envs[0].task.visit_next(lateral[chosen])
                 action = self.policy.act(state, greedy=greedy)
                 increments = self.policy.action_values[action].cpu().numpy()
                 previous = _Step(state, action, rewards, increments)
@@ -250,8 +316,13 @@ class Experiment:
             "distance": self.distance.state_dict(),
             "env_random": [env.task.random.get_state() for env in self.envs],
             "stage": self.stage,
-            # only a walking run draws from the walkers' streams
+            # only a walking run draws from the walkers' streams, only a planning one plans
             **({"walkers": [w.state_dict() for w in self.walkers]} if self.walks else {}),
+            **(
+                {"planner": self.planner.state_dict(), "explore": self.explore_random.get_state()}
+                if self.planner is not None
+                else {}
+            ),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -263,6 +334,9 @@ class Experiment:
         if self.walks:
             for walker, walker_state in zip(self.walkers, state["walkers"], strict=True):
                 walker.load_state_dict(walker_state)
+        if self.planner is not None:
+            self.planner.load_state_dict(state["planner"])
+            self.explore_random.set_state(state["explore"])
         self.set_stage(state["stage"])
 
     def close(self) -> None:
@@ -282,20 +356,26 @@ class _Step(NamedTuple):
 class _Tally:
     """What one presentation reports (:class:`Presentation`), gathered iteration by iteration."""
 
-    def __init__(self, robots: int, lateral: list[float], trial_length: int) -> None:
+    def __init__(
+        self, robots: int, lateral: list[float], trial_length: int, routed: bool = False
+    ) -> None:
         self.lateral, self.trial_length = lateral, trial_length
         shape = (robots, len(lateral))
-        self.pans, self.targets, self.start_pans = np.zeros(shape), np.zeros(shape), np.zeros(shape)
-        self.best_pans, self.best_rewards = np.zeros(shape), np.full(shape, -np.inf)
+        # on a chosen route the positions never visited keep NaN
+        blank = np.full(shape, np.nan) if routed else np.zeros(shape)
+        self.pans, self.targets, self.start_pans = blank.copy(), blank.copy(), blank.copy()
+        self.best_pans, self.best_rewards = blank.copy(), np.full(shape, -np.inf)
+        self.visited: list[int] | None = [] if routed else None
         self.reward_sum, self.error_sums, self.encodings = 0.0, {}, 0
         self.stat_sums: dict[str, float] = {}
         self.updates = 0
 
     def encoded(
-        self, obs: list[dict], out: CoderOutput, pans: np.ndarray, rewards: np.ndarray
+        self, obs: list[dict], out: CoderOutput, pans: np.ndarray, rewards: np.ndarray, p: int
     ) -> None:
-        """The coder's output ``out`` (rewards (B,) in float64) for images seen at ``pans`` (B,)."""
-        iteration, p = int(obs[0]["iteration"]), int(obs[0]["position_index"])
+        """The coder's output ``out`` (rewards (B,) in float64) for images seen at ``pans`` (B,),
+        at position ``p`` of L."""
+        iteration = int(obs[0]["iteration"])
         self.reward_sum += float(out.reward.mean())
         for scale, e in out.errors.items():
             self.error_sums[scale] = self.error_sums.get(scale, 0.0) + float(e.mean())
@@ -314,23 +394,26 @@ class _Tally:
             self.stat_sums[k] = self.stat_sums.get(k, 0.0) + float(v)
         self.updates += 1
 
-    def presentation(self, obs: list[dict], keep_view: bool) -> Presentation:
-        """The record, from the tally and the last observations."""
+    def presentation(self, obs: list[dict] | None, keep_view: bool) -> Presentation:
+        """The record, from the tally and the last observations (None: before the first; the
+        distances and textures are then unknown, NaN and −1)."""
         view = None
         if keep_view:
             view = np.concatenate([obs[0]["reference"], obs[0]["image"]], axis=1)
-        updates = self.updates
+        updates, encodings = self.updates, max(self.encodings, 1)
+        robots = self.pans.shape[0]
         return Presentation(
             lateral_positions=self.lateral,
             pans=self.pans,
             targets=self.targets,
             best_pans=self.best_pans,
-            distances=np.array([float(o["distance"]) for o in obs]),
-            textures=np.array([int(o["texture_index"]) for o in obs]),
+            distances=np.array([float(o["distance"]) for o in obs] if obs else [np.nan] * robots),
+            textures=np.array([int(o["texture_index"]) for o in obs] if obs else [-1] * robots),
             steps=self.encodings,
-            reward=self.reward_sum / self.encodings,
-            errors={k: v / self.encodings for k, v in self.error_sums.items()},
+            reward=self.reward_sum / encodings,
+            errors={k: v / encodings for k, v in self.error_sums.items()},
             policy_stats={k: v / updates for k, v in self.stat_sums.items()} if updates else {},
             last_view=view,
             start_pans=self.start_pans,
+            route=None if self.visited is None else list(self.visited),
         )

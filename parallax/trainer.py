@@ -49,6 +49,8 @@ class Trainer:
             self.exp.lateral_positions, window=int(cfg.metrics.mae_window)
         )
         self.dist = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
+        # beyond the paper (§7): the planned routes' estimates, apart from the sweeps' network
+        self.route_dist = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
         self.presentation = 0
         self.steps = 0
         self.wall_time = 0.0
@@ -79,6 +81,7 @@ class Trainer:
             "before_perturbation": self.before_perturbation,
             "last_distance_stats": self.last_distance_stats,
             "global_rng": checkpoint.global_rng_state(),
+            **({"route_dist": self.route_dist.state_dict()} if self.exp.planner else {}),
         }
 
     def save(self) -> None:
@@ -98,6 +101,8 @@ class Trainer:
         self.wall_time = float(state["wall_time"])
         self.before_perturbation = state["before_perturbation"]
         self.last_distance_stats = state["last_distance_stats"]
+        if self.exp.planner is not None:
+            self.route_dist.load_state_dict(state["route_dist"])
         checkpoint.set_global_rng_state(state["global_rng"])
         if self.metrics_path.exists():
             kept = [
@@ -138,6 +143,24 @@ class Trainer:
             self.last_distance_stats = stats
         return walked
 
+    def _route_record(self, pres: Presentation, key: str, learnt_distance: bool) -> dict:
+        """A planned route's log entries, and its estimate scored online (a sweep's is the
+        network's, in ``distance_error``)."""
+        lateral_cm = [100.0 * l for l in pres.lateral_positions]
+        visited = list(range(len(lateral_cm))) if pres.route is None else pres.route
+        record = {
+            "route": pres.route,
+            "trials": len(visited),
+            "travel_cm": 2.0 * max(lateral_cm[k] for k in visited),
+        }
+        if pres.route is not None and learnt_distance:
+            pans = getattr(pres, key)[0]
+            estimate = self.exp.planner.estimate(pres.route, pans[pres.route])
+            self.route_dist.record(estimate, float(pres.distances[0]))
+            record["route_estimate"] = estimate
+        record["route_distance_error"] = self.route_dist.by_range()
+        return record
+
     def _maybe_advance_stage(self) -> None:
         if self.exp.on_final_list:
             return
@@ -153,12 +176,22 @@ class Trainer:
         # paper; derived from the count, so a resumed run switches at the same presentation
         jittered = start_jitter_on(self.cfg, self.presentation)
         self.exp.set_start_jitter(jittered)
-        pres = self.exp.run_presentation(learn=True, greedy=False, keep_view=keep_view)
+        key = READOUT_PANS[distance_readout(self.cfg)]
+        sweeps = self.exp.sweeps(float(self.cfg.movement.explore))
+        route = None if sweeps else self.exp.planned_route(key)
+        pres = self.exp.run_presentation(learn=True, greedy=False, keep_view=keep_view, route=route)
+        visited = range(len(pres.labels)) if pres.route is None else pres.route
         for b in range(self.exp.robots):
-            for p, label in enumerate(pres.labels):
-                self.eye.record(label, pres.pans[b, p], pres.targets[b, p])
+            for p in visited:
+                self.eye.record(pres.labels[p], pres.pans[b, p], pres.targets[b, p])
         learnt_distance = self.exp.on_final_list
-        walked = self._learn_distance(pres) if learnt_distance else {}
+        walked = moved = {}
+        if learnt_distance and pres.route is None:
+            walked = self._learn_distance(pres)
+            if self.exp.planner is not None:  # a full sweep: the planner's queue learns it
+                self.exp.planner.observe(getattr(pres, key)[0], float(pres.distances[0]))
+        if self.exp.planner is not None:
+            moved = self._route_record(pres, key, learnt_distance)
         ran_perturbed = self.perturbed  # before the count moves on: how this presentation ran
         self.presentation += 1
         self.steps += pres.steps
@@ -193,6 +226,8 @@ class Trainer:
             # with distance.targets=odometry: each robot's strides to the panel (None: it did not
             # walk), the slip-free count, and the odometry's error
             **walked,
+            # with movement.route=planned: where the robot went (indices into L; null: a sweep)
+            **moved,
             **{f"lm_{k}": v for k, v in self.last_distance_stats.items()},
         }
         return pres, record
@@ -214,6 +249,7 @@ class Trainer:
             "mae_per_position": self.eye.mae_per_position(),
             "last_trials": self.eye.last_trials(int(self.cfg.metrics.summary_trials)),
             "distance_error": self.dist.by_range(),
+            **({"route_distance_error": self.route_dist.by_range()} if self.exp.planner else {}),
         }
 
     def summary(self) -> dict:
@@ -250,6 +286,12 @@ class Trainer:
             writer.add_scalar(f"distance/error_pct_{rng}", v, step)
         writer.add_scalar("perf/steps_per_second", steps_per_second, step)
         writer.add_scalar("curriculum/stage", record["stage"], step)
+        if "route" in record:
+            writer.add_scalar("movement/sweep", float(record["route"] is None), step)
+            writer.add_scalar("movement/trials", record["trials"], step)
+            writer.add_scalar("movement/travel_cm", record["travel_cm"], step)
+            for rng, v in record["route_distance_error"].items():
+                writer.add_scalar(f"movement/route_error_pct_{rng}", v, step)
         if "walk_strides" in record:
             counted = [n for n in record["walk_strides"] if n is not None]
             writer.add_scalar("walk/walks", len(counted), step)

@@ -1,6 +1,7 @@
 """The experiment files are the record of every result: the paper's algorithm as written
 (conf/experiment/paper_*.yaml), our recipe (recipe_*.yaml, quickstart.yaml) and, beyond the
-paper, distance from the robot's own body (embodied_*.yaml)."""
+paper, distance from the robot's own body (embodied_*.yaml) and a robot that plans its movement
+(planned_*.yaml)."""
 
 from pathlib import Path
 
@@ -36,7 +37,7 @@ def test_every_setup_has_both_families_and_nothing_else():
         [f"paper_{s}" for s in SETUPS]
         + [f"recipe_{s}" for s in SETUPS]
         + ["paper_algorithm", "quickstart"]
-        + ["embodied_multi_5_20_weighted", "embodied_growth"]
+        + ["embodied_multi_5_20_weighted", "embodied_growth", "planned_multi_5_20_weighted"]
     )
     assert names == expected
 
@@ -123,7 +124,13 @@ def test_the_committed_models_are_reproduced_by_one_experiment_name(run):
 
 
 @pytest.mark.parametrize(
-    "name", ["paper_multi_5_20_weighted", "recipe_multi_5_20_weighted", "embodied_growth"]
+    "name",
+    [
+        "paper_multi_5_20_weighted",
+        "recipe_multi_5_20_weighted",
+        "embodied_growth",
+        "planned_multi_5_20_weighted",
+    ],
 )
 def test_each_family_trains_and_resumes_exactly(name, tmp_path, tiny_overrides):
     """Shrunk like the other tests' runs, each family trains; stopped and resumed, it gives the

@@ -325,6 +325,27 @@ class PerturbationConfig:
     start_fraction: float | None = None
 
 
+# --- how the robot moves (top level) ---------------------------------------------------------
+@dataclass
+class MovementConfig:
+    """Beyond the paper (its first future work, §7): the robot chooses where to move next and
+    when to stop (parallax.distance.planner), instead of sweeping all of L."""
+
+    #: list: every position of L in order, every presentation (the paper) | planned: the robot
+    #: plans its route from its confidence (one robot, supervisor targets).
+    route: str = "list"
+    #: planned: what one trial (t_h eye movements) costs, in percentage points of expected
+    #: distance error.
+    price_per_trial: float = 0.1
+    #: planned: what one centimetre of lateral travel (out to the farthest position and back)
+    #: costs, in percentage points of expected distance error.
+    price_per_cm: float = 0.0
+    #: planned: the probability that a training presentation sweeps all of L instead; the
+    #: planner and the distance network learn from those sweeps (and every presentation sweeps
+    #: until the planner's queue of c sweeps is full).
+    explore: float = 0.25
+
+
 # --- the run (top level) ---------------------------------------------------------------------
 @dataclass
 class TrainConfig:
@@ -369,6 +390,7 @@ class Config:
     distance: DistanceConfig = field(default_factory=DistanceConfig)
     curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
     perturbation: PerturbationConfig = field(default_factory=PerturbationConfig)
+    movement: MovementConfig = field(default_factory=MovementConfig)
     #: The run's seed; every component's seed is derived from it (parallax.experiment.seeds_for).
     seed: int = 0
     #: cpu | cuda | cuda:<n>: where the coder, policy and distance learner live (the world

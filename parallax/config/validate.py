@@ -33,6 +33,8 @@ RUN_TIME_KEYS = frozenset(
         "distance.seed",
     }
 )
+#: movement.route: the paper's sweep of L, or the route the robot plans (beyond the paper, §7).
+ROUTES = ("list", "planned")
 #: The eye image sizes the world can render (parallax.envs.hoap3.Physics.create).
 IMAGE_SIZES = (16, 2048)
 
@@ -126,6 +128,7 @@ def validate(cfg: DictConfig) -> None:
     _curriculum(check)
     _perturbation(check)
     _walk(check)
+    _movement(check)
     _stimuli(check)  # last: a folder of images is decoded here (once per process)
 
 
@@ -314,6 +317,28 @@ def _walk(check: _Checks) -> None:
             start,
             "a growth spurt needs walks: set distance.targets=odometry, or leave it null",
         )
+
+
+def _movement(check: _Checks) -> None:
+    route = check.choice("movement.route", ROUTES)
+    check.number("movement.price_per_trial", at_least=0, what=" (percentage points per trial)")
+    check.number("movement.price_per_cm", at_least=0, what=" (percentage points per cm)")
+    check.number("movement.explore", above=0, at_most=1)
+    if route == "planned":
+        if check.get("env.robots") != 1:
+            check.fail("env.robots", check.get("env.robots"), "movement.route=planned needs 1")
+        if check.get("distance.targets") != "supervisor":
+            check.fail(
+                "distance.targets",
+                check.get("distance.targets"),
+                "movement.route=planned learns from the supervisor's distances",
+            )
+        if check.get("curriculum.stages") is not None:
+            check.fail(
+                "curriculum.stages",
+                check.get("curriculum.stages"),
+                "movement.route=planned plans over all of L: leave the stages null",
+            )
 
 
 def _curriculum(check: _Checks) -> None:

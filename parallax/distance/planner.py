@@ -161,6 +161,16 @@ class MovementPlanner:
         best = int(np.argmin(costs))
         return candidates[best] if costs[best] < now else None
 
+    def state_dict(self) -> dict:
+        return {"inputs": self.inputs.copy(), "distances": self.distances.copy()}
+
+    def load_state_dict(self, state: dict) -> None:
+        inputs, distances = np.asarray(state["inputs"]), np.asarray(state["distances"])
+        if inputs.ndim != 2 or inputs.shape[1] != len(self.lateral_positions):
+            raise ValueError(f"planner state is for {inputs.shape[1:]} positions, not this L")
+        self.inputs, self.distances = inputs.copy(), distances.copy()
+        self._fits.clear()
+
     def plan(self, s: Sequence[float]) -> tuple[list[int], float]:
         """The positions the robot would visit for a presentation whose full vector is ``s``
         (it sees only the pans it visits), and its estimate when it stops."""

@@ -147,6 +147,10 @@ class LateralPursuitTask(base.Task):
         self._reference: np.ndarray | None = None
         self._position_index = 0
         self._iteration = 0
+        # a route the robot chooses as it goes (beyond the paper, §7): the next episode's first
+        # position, and whether the running episode is one
+        self._pending_route: float | None = None
+        self._open_route = False
 
     # --- settings the trainer changes --------------------------------------------------------
     def attach(self, physics: Physics) -> None:
@@ -202,6 +206,24 @@ class LateralPursuitTask(base.Task):
         if distance is not None:
             self._forced_distance = check_distance(distance)
 
+    def start_route(self, lateral_m: float) -> None:
+        """Make the next episode a route the robot chooses as it goes (beyond the paper, §7):
+        it starts at ``lateral_m``, each next position comes from :meth:`visit_next`, and it
+        ends when the robot stops (the environment never ends it: reset starts the next)."""
+        self._pending_route = float(check_lateral_positions([lateral_m])[0])
+
+    def visit_next(self, lateral_m: float) -> None:
+        """On a route, at a trial's last iteration: the next trial is at ``lateral_m``."""
+        if not self._open_route:
+            raise RuntimeError("visit_next needs a route (start_route before the reset)")
+        if self._iteration != self._trial_length - 1:
+            raise RuntimeError(
+                f"visit_next comes at a trial's last iteration ({self._trial_length - 1}), "
+                f"not at {self._iteration}"
+            )
+        step = float(check_lateral_positions([lateral_m])[0])
+        self._episode_positions = (*self._episode_positions[: self._position_index + 1], step)
+
     @property
     def start_jitter_enabled(self) -> bool:
         """Whether new trials start from a jittered pan (when a jitter is configured)."""
@@ -241,7 +263,11 @@ class LateralPursuitTask(base.Task):
             texture, self._forced_texture = self._forced_texture, None
         if self._forced_distance is not None:
             distance, self._forced_distance = self._forced_distance, None
-        self._episode_positions = self._pending_positions
+        self._open_route = self._pending_route is not None
+        if self._open_route:
+            self._episode_positions, self._pending_route = (self._pending_route,), None
+        else:
+            self._episode_positions = self._pending_positions
         physics.set_stimulus(texture, distance)
         physics.set_lateral_position(0.0)
         physics.set_pan_deg(0.0)
@@ -305,6 +331,8 @@ class LateralPursuitTask(base.Task):
         return -abs(physics.pan_deg() - physics.target_pan_deg())
 
     def get_termination(self, physics: Physics) -> float | None:
+        if self._open_route:  # the robot ends a route by stopping
+            return None
         last_position = self._position_index == len(self._episode_positions) - 1
         if last_position and self._iteration == self._trial_length - 1:
             return 1.0

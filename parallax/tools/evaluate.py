@@ -107,6 +107,39 @@ def distance_results(
     }
 
 
+def route_results(planner, pans: np.ndarray, distances: np.ndarray, trial_length: int) -> dict:
+    """Where a planning robot (movement.route=planned) goes and what it estimates, for each
+    greedy presentation of ``pans``: it sees only the pans of the positions it visits. Each
+    trial starts from pan 0 and the frozen greedy eye has no randomness, so a position's pan on
+    the route is its pan in the sweep (tests/test_movement.py runs the route to check)."""
+    from parallax.distance.metrics import distance_error_by_range
+
+    lateral_cm = [100.0 * l for l in planner.lateral_positions]
+    routes, estimates = [], []
+    for s in np.asarray(pans, dtype=np.float64):
+        visited, estimate = planner.plan(s)
+        routes.append(visited)
+        estimates.append(estimate)
+    distances = np.asarray(distances, dtype=np.float64)
+    trials = np.array([len(v) for v in routes], dtype=np.float64)
+    farthest = np.array([max(lateral_cm[k] for k in v) for v in routes])
+    return {
+        "price_per_trial": planner.price_per_trial,
+        "price_per_cm": planner.price_per_cm,
+        "by_range": distance_error_by_range(np.array(estimates), distances),
+        "presentations": int(distances.size),
+        "eye_movements": float(trials.mean() * trial_length),
+        "travel_cm": float(2.0 * farthest.mean()),
+        "trials_by_distance": {
+            f"{d:.2f}": float(trials[distances == d].mean()) for d in np.unique(distances)
+        },
+        "farthest_cm_by_distance": {
+            f"{d:.2f}": float(farthest[distances == d].mean()) for d in np.unique(distances)
+        },
+        "routes": routes,
+    }
+
+
 def evaluate(
     run_dir: str | Path,
     textures: int = 1,
@@ -221,6 +254,10 @@ def evaluate(
                 "distances": between_run["distances"].tolist(),
             }
         curves = {}
+        if exp.planner is not None and exp.planner.is_ready:
+            result["route"] = route_results(
+                exp.planner, runs["greedy"]["pans"], runs["greedy"]["distances"], exp.trial_length
+            )
         if exp.distance.is_ready:
             grid_distances = runs["greedy"]["distances"]
             result["distance"] = distance_results(
@@ -286,6 +323,13 @@ def format_eval(result: dict) -> str:
                 f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
                 for k, v in result["distance"]["by_range"].items()
             )
+        )
+    if "route" in result:
+        route = result["route"]
+        lines.append(
+            f"planned route: distance error {route['by_range']['total']:.2f} % with "
+            f"{route['eye_movements']:.0f} eye movements and {route['travel_cm']:.0f} cm of "
+            "travel per presentation"
         )
     if "distance_between_grid" in result:
         lines.append(

@@ -158,7 +158,8 @@ def replay(
                 break
         if body is not None:  # as the trainer: the spurt after the checkpoint at the switch
             body.presentation(int(record["presentation"]) - 1)
-        if record["learnt_distance"]:
+        # a planned route's s is partial: the network learns from full sweeps only, as in training
+        if record["learnt_distance"] and record.get("route") is None:
             tracker.presentation = int(record["presentation"])
             truths, readings = record["distances"], None
             if body is not None:

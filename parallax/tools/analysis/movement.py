@@ -33,6 +33,7 @@ import numpy as np
 from parallax.config import READOUT_PANS, distance_readout, load_run_config
 from parallax.distance.planner import MovementPlanner
 from parallax.metrics import position_label
+from parallax.tools.evaluate import route_results
 from parallax.tools.replay import ReplayError, find_sources, read_stream
 
 PRICES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
@@ -73,26 +74,12 @@ def curve(run_dir: Path, prices: Sequence[float]) -> dict:
     points = []
     for price in prices:
         planner.price_per_trial = float(price)
-        routes, errors = [], []
-        for s, d in zip(pans, distances):
-            visited, estimate = planner.plan(s)
-            routes.append(visited)
-            errors.append(100.0 * abs(estimate - d) / d)
-        points.append(
-            {
-                "price_per_trial": float(price),
-                "error_pct": float(np.mean(errors)),
-                "eye_movements": float(np.mean([len(v) for v in routes])) * trial_length,
-                "travel_cm": float(np.mean([2 * max(lateral_cm[k] for k in v) for v in routes])),
-                "trials_by_distance": _by_distance(distances, [len(v) for v in routes]),
-                "farthest_cm_by_distance": _by_distance(
-                    distances, [max(lateral_cm[k] for k in v) for v in routes]
-                ),
-                "first_positions_cm": sorted(
-                    {position_label(planner.lateral_positions[v[0]]) for v in routes}
-                ),
-            }
+        point = route_results(planner, pans, distances, trial_length)
+        point["error_pct"] = point["by_range"]["total"]
+        point["first_positions_cm"] = sorted(
+            {position_label(planner.lateral_positions[v[0]]) for v in point.pop("routes")}
         )
+        points.append(point)
     fixed = {}
     for name, upto in (("5-10", 0.10), ("5-20", 0.20)):
         chosen = [k for k, l in enumerate(planner.lateral_positions) if l <= upto + 1e-9]
@@ -114,11 +101,6 @@ def curve(run_dir: Path, prices: Sequence[float]) -> dict:
         "fixed_estimator": fixed,
         "network_error_pct": network,
     }
-
-
-def _by_distance(distances: np.ndarray, values: Sequence[float]) -> dict[str, float]:
-    values = np.asarray(values, dtype=np.float64)
-    return {f"{d:.2f}": float(values[distances == d].mean()) for d in np.unique(distances)}
 
 
 def table(results: list[dict]) -> str:
