@@ -15,7 +15,11 @@ The eye here learnt from full sweeps; a robot that plans while it learns visits 
 positions less often, and its eye there may learn more slowly.
 
     python -m parallax.tools.analysis.movement RUN_OR_MULTIRUN… --out DIR
-        [--prices 0 0.05 0.1 0.2 0.5 1]
+        [--prices 0 0.05 0.1 0.2 0.5 1] [--trained PLANNED_RUN_OR_MULTIRUN…]
+
+``--trained``: runs trained with movement.route=planned, evaluated by parallax-eval: their
+planned routes on held-out presentations, and their eye beside the sweeping runs' eye (the
+last trials' MAE at each position, and the greedy held-out MAE per position).
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ def planner_of(run_dir: Path, price_per_trial: float = 0.0) -> tuple[MovementPla
         lateral, queue_size=int(cfg.distance.queue_size), price_per_trial=price_per_trial
     )
     key = READOUT_PANS[distance_readout(cfg)]
-    learnt = [r for r in read_stream(run_dir) if r["learnt_distance"]]
+    learnt = [r for r in read_stream(run_dir) if r["learnt_distance"] and r.get("route") is None]
     for record in learnt[-planner.queue_size :]:
         for s, d in zip(record[key], record["distances"]):
             planner.observe(s, d)
@@ -144,6 +148,103 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def trained(run_dir: Path) -> dict:
+    """A run trained with planned routes: its held-out route block and its eye."""
+    cfg = load_run_config(run_dir)
+    _, _, evaluation = held_out(run_dir)
+    if "route" not in evaluation:
+        raise ReplayError(f"{run_dir / EVAL} has no planned route (movement.route=list?)")
+    route = {k: v for k, v in evaluation["route"].items() if k != "routes"}
+    return {
+        "source": str(run_dir),
+        "seed": int(cfg.seed),
+        "price_per_trial": float(cfg.movement.price_per_trial),
+        "explore": float(cfg.movement.explore),
+        "route": route,
+        "eye": _eye(run_dir, evaluation),
+    }
+
+
+def _eye(run_dir: Path, evaluation: dict) -> dict:
+    summary = json.loads((run_dir / "summary.json").read_text())
+    return {
+        "last_trials_mae": {k: v["mean"] for k, v in summary["last_trials"].items()},
+        "last_trials_count": {k: v["trials"] for k, v in summary["last_trials"].items()},
+        "held_out_greedy_mae": evaluation["mae_per_position"]["greedy"],
+    }
+
+
+def trained_table(planned: list[dict], sweeping: list[dict]) -> str:
+    """The trained planners' routes, and their eye per position beside the sweeping runs'."""
+
+    def spread(values: list[float], digits: int = 2) -> str:
+        sd = statistics.stdev(values) if len(values) > 1 else 0.0
+        return f"{statistics.fmean(values):.{digits}f} ± {sd:.{digits}f}"
+
+    lines = [
+        "| price per trial | runs | held-out presentations | distance error (%) | "
+        "eye movements | lateral travel (cm) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for price in sorted({r["price_per_trial"] for r in planned}):
+        rows = [r["route"] for r in planned if r["price_per_trial"] == price]
+        lines.append(
+            f"| {price:g} | {len(rows)} | {rows[0]['presentations']} | "
+            f"{spread([r['by_range']['total'] for r in rows])} | "
+            f"{spread([r['eye_movements'] for r in rows], 0)} | "
+            f"{spread([r['travel_cm'] for r in rows], 0)} |"
+        )
+    labels = list(planned[0]["eye"]["last_trials_mae"])
+    lines += [
+        "",
+        "Eye-movement MAE (°) per lateral position (cm), mean over runs: the last 100 trials "
+        "of training at that position, and the greedy eye on the held-out presentations.",
+        "",
+        "| | " + " | ".join(labels) + " |",
+        "|---|" + "---|" * len(labels),
+    ]
+    for name, runs in (("planned", planned), ("sweeping", sweeping)):
+        if not runs:
+            continue
+        last = [statistics.fmean(r["eye"]["last_trials_mae"][k] for r in runs) for k in labels]
+        held = [statistics.fmean(r["eye"]["held_out_greedy_mae"][k] for r in runs) for k in labels]
+        lines.append(f"| {name}, training | " + " | ".join(f"{v:.3f}" for v in last) + " |")
+        lines.append(f"| {name}, held-out | " + " | ".join(f"{v:.3f}" for v in held) + " |")
+    return "\n".join(lines)
+
+
+def report_text(results: list[dict], planned: list[dict], sweeping: list[dict], argv) -> str:
+    sources = [r["source"] for r in results]
+    parts = [
+        "# The robot decides how far to move: results",
+        "",
+        "Written by `python -m parallax.tools.analysis.movement " + " ".join(argv) + "`.",
+        "",
+        "## The planner on the eye of runs that swept all of L",
+        "",
+        "Runs trained by `parallax-train experiment=recipe_multi_5_20_weighted seed=N` and "
+        "evaluated by `parallax-eval RUN` (held-out photographs, the full grid):",
+        *[f"- `{s}`" for s in sources],
+        "",
+        table(results),
+        "",
+        "![distance error against movement](error_vs_movement.png)",
+        "![positions visited by distance](stops_by_distance.png)",
+    ]
+    if planned:
+        parts += [
+            "",
+            "## Robots that planned while they learnt",
+            "",
+            "Runs trained by `parallax-train experiment=planned_multi_5_20_weighted seed=N` "
+            "and evaluated by `parallax-eval RUN`:",
+            *[f"- `{r['source']}`" for r in planned],
+            "",
+            trained_table(planned, sweeping),
+        ]
+    return "\n".join(parts) + "\n"
+
+
 def figures(results: list[dict], out: Path) -> None:
     import matplotlib
 
@@ -195,17 +296,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("sources", nargs="+", help="finished runs with parallax-eval results")
     parser.add_argument("--out", required=True, help="folder for movement.json and figures")
     parser.add_argument("--prices", nargs="+", type=float, default=list(PRICES))
+    parser.add_argument("--trained", nargs="*", default=[], help="runs trained with planning")
     args = parser.parse_args(argv)
     try:
-        results = [curve(source, args.prices) for source in find_sources(args.sources)]
+        sources = find_sources(args.sources)
+        results = [curve(source, args.prices) for source in sources]
+        planned = [trained(run) for run in find_sources(args.trained)] if args.trained else []
+        sweeping = [{"eye": _eye(s, held_out(s)[2])} for s in sources] if planned else []
     except (ReplayError, FileNotFoundError, ValueError) as exc:
         print(f"movement: error: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "movement.json").write_text(json.dumps(results, indent=2) + "\n")
+    (out / "movement.json").write_text(
+        json.dumps({"replayed": results, "trained": planned}, indent=2) + "\n"
+    )
     figures(results, out)
-    print(table(results))
+    report = report_text(results, planned, sweeping, argv if argv is not None else sys.argv[1:])
+    (out / "README.md").write_text(report)
+    print(report)
     return 0
 
 
