@@ -254,6 +254,22 @@ class Experiment:
         first trial, then at the end of each — with the positions visited so far and the
         presentation as it stands; None stops it there.
         """
+        if not learn:  # frozen: acting must not move the policy's running feature statistics
+            was_training = self.policy.training
+            self.policy.eval()
+            try:
+                return self._run_presentation(False, greedy, keep_view, route)
+            finally:
+                self.policy.train(was_training)
+        return self._run_presentation(True, greedy, keep_view, route)
+
+    def _run_presentation(
+        self,
+        learn: bool,
+        greedy: bool,
+        keep_view: bool,
+        route: Callable[[list[int], Presentation], int | None] | None,
+    ) -> Presentation:
         learn_dictionaries = learn and self.coder.learn
         lateral = list(self.envs[0].task.lateral_positions)
         tally = _Tally(self.robots, lateral, self.trial_length, routed=route is not None)

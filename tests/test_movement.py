@@ -3,9 +3,9 @@ tests/conftest.py: what metrics.jsonl, the summary and the checkpoint record for
 planned routes; that the sweeps are the presentations the explore stream chose and a list run is
 untouched by the movement settings; that a routed presentation visits the positions its callback
 chose and, with the frozen greedy eye and no start jitter, sees the pans of a full sweep (the
-claim behind parallax-eval's "route" block); resuming; parallax-eval's route block and replay;
-and the configuration checks of the movement settings. Strict xfails mark where that claim does
-not hold: the "frozen" eye's feature statistics still move as it acts, and jittered starts."""
+claim that a route's trials are the sweep's); resuming; parallax-eval's route block (the routes
+the robot runs, also with jittered starts) and replay; and the configuration checks of the
+movement settings."""
 
 from __future__ import annotations
 
@@ -283,7 +283,6 @@ def test_a_route_visits_the_chosen_positions_in_order(learnt, monkeypatch):
     "order, texture, distance", [([3, 0], 1, 6.0), ([2], 3, 3.0), ([1, 3, 0], 4, 9.0)], ids=str
 )
 def test_a_greedy_route_sees_the_pans_of_the_full_sweep(learnt, order, texture, distance):
-    # these stimuli agree; not every one does (the xfail below)
     exp, state = learnt
     sweep = _frozen(exp, state, texture, distance)
     routed = _frozen(exp, state, texture, distance, _scripted(order))
@@ -296,14 +295,6 @@ def test_a_greedy_route_sees_the_pans_of_the_full_sweep(learnt, order, texture, 
     assert routed.distances.tolist() == sweep.distances.tolist() == [distance]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the frozen greedy eye is not frozen: in a learn=False presentation the policy still "
-    "acts in training mode, so each action updates its running feature statistics "
-    "(FeatureNormalizer.norm_mean, feature_norm=difference) and the trials before a position "
-    "change its pans; a route that reaches a position after other trials can then see other "
-    "pans than the sweep, which route_results assumes it does not",
-)
 def test_a_reversed_route_sees_the_pans_of_the_sweep_everywhere(learnt):
     # stimuli where, from this state, a route through L backwards reaches a position with other
     # pans than the sweep (with policy.eval() set, every one of them agrees)
@@ -317,11 +308,6 @@ def test_a_reversed_route_sees_the_pans_of_the_sweep_everywhere(learnt):
         np.testing.assert_array_equal(routed.best_pans, sweep.best_pans)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="run_presentation(learn=False) leaves the policy in training mode: acting updates "
-    "the normaliser's count and norm_mean",
-)
 def test_a_frozen_presentation_leaves_the_policy_as_it_was(learnt):
     exp, state = learnt
     exp.load_state_dict(copy.deepcopy(state))
@@ -444,14 +430,6 @@ def test_parallax_evals_routes_are_those_the_robot_runs(planned_run, evaluated):
     assert json.dumps(evaluated["route"]["by_range"]) == json.dumps(by_range)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="with jittered starts (--start-jitter on, or a run whose trials are jittered to the "
-    "end, the default train.start_jitter_presentations=null) route_results still plans on the "
-    "sweeps' pans: a sweep draws a start pan per position of L in order, a route one per trial "
-    "it makes, so the pans a route sees are not the sweep's and the block is not what the "
-    "routes give",
-)
 def test_parallax_evals_routes_with_jittered_starts_are_those_the_robot_runs(planned_run, tmp_path):
     from parallax.tools.evaluate import evaluate
 

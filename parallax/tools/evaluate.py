@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -46,17 +47,23 @@ def grid(start: float, stop: float, step: float) -> list[float]:
 
 
 def run_jobs(
-    exp: Experiment, jobs: list[tuple[float, int]], greedy: bool, readout: str = "last"
+    exp: Experiment,
+    jobs: list[tuple[float, int]],
+    greedy: bool,
+    readout: str = "last",
+    route: Callable | None = None,
 ) -> dict[str, np.ndarray]:
-    """Run one frozen presentation per (distance, texture) job, B robots at a time."""
-    pans, targets, dists, starts = [], [], [], []
+    """Run one frozen presentation per (distance, texture) job, B robots at a time (with
+    ``route``, Experiment.run_presentation's, one robot on the route it plans)."""
+    pans, targets, dists, starts, routes = [], [], [], [], []
     B = exp.robots
     for start in range(0, len(jobs), B):
         batch = jobs[start : start + B]
         padded = batch + [batch[-1]] * (B - len(batch))  # idle robots repeat the last job
         for env, (d, tex) in zip(exp.envs, padded):
             env.task.set_next_stimulus(texture_index=tex, distance=d)
-        pres = exp.run_presentation(learn=False, greedy=greedy)
+        pres = exp.run_presentation(learn=False, greedy=greedy, route=route)
+        routes.append(pres.route)
         pans.append(getattr(pres, READOUT_PANS[readout])[: len(batch)])
         targets.append(pres.targets[: len(batch)])
         dists.append(pres.distances[: len(batch)])
@@ -66,6 +73,7 @@ def run_jobs(
         "targets": np.concatenate(targets),
         "distances": np.concatenate(dists),
         "start_pans": np.concatenate(starts),
+        "routes": routes,
     }
 
 
@@ -108,25 +116,31 @@ def distance_results(
 
 
 def route_results(planner, pans: np.ndarray, distances: np.ndarray, trial_length: int) -> dict:
-    """Where a planning robot (movement.route=planned) goes and what it estimates, for each
-    greedy presentation of ``pans``: it sees only the pans of the positions it visits. Each
-    trial starts from pan 0 and the frozen greedy eye has no randomness, so a position's pan on
-    the route is its pan in the sweep (tests/test_movement.py runs the route to check)."""
-    from parallax.distance.metrics import distance_error_by_range
-
-    lateral_cm = [100.0 * l for l in planner.lateral_positions]
+    """Where a planning robot (movement.route=planned) would go and what it would estimate for
+    each presentation whose full vector s is a row of ``pans``, seeing only the pans of the
+    positions it visits (parallax.tools.analysis.movement: the planner on sweeps' eyes)."""
     routes, estimates = [], []
     for s in np.asarray(pans, dtype=np.float64):
         visited, estimate = planner.plan(s)
         routes.append(visited)
         estimates.append(estimate)
+    return route_summary(planner, routes, estimates, distances, trial_length)
+
+
+def route_summary(
+    planner, routes: list[list[int]], estimates, distances: np.ndarray, trial_length: int
+) -> dict:
+    """Distance error, eye movements and lateral travel of planned routes (indices into L)."""
+    from parallax.distance.metrics import distance_error_by_range
+
+    lateral_cm = [100.0 * l for l in planner.lateral_positions]
     distances = np.asarray(distances, dtype=np.float64)
     trials = np.array([len(v) for v in routes], dtype=np.float64)
     farthest = np.array([max(lateral_cm[k] for k in v) for v in routes])
     return {
         "price_per_trial": planner.price_per_trial,
         "price_per_cm": planner.price_per_cm,
-        "by_range": distance_error_by_range(np.array(estimates), distances),
+        "by_range": distance_error_by_range(np.asarray(estimates, dtype=np.float64), distances),
         "presentations": int(distances.size),
         "eye_movements": float(trials.mean() * trial_length),
         "travel_cm": float(2.0 * farthest.mean()),
@@ -136,7 +150,7 @@ def route_results(planner, pans: np.ndarray, distances: np.ndarray, trial_length
         "farthest_cm_by_distance": {
             f"{d:.2f}": float(farthest[distances == d].mean()) for d in np.unique(distances)
         },
-        "routes": routes,
+        "routes": [list(map(int, v)) for v in routes],
     }
 
 
@@ -228,6 +242,9 @@ def evaluate(
             "mae": {},
         }
         runs = {}
+        # the worlds' random streams (textures aside: forced; the jittered start pans) as the
+        # checkpoint left them, for the planned routes to start from as the sweeps did
+        start_streams = [env.task.random.get_state() for env in exp.envs]
         for mode, greedy in (("greedy", True), ("sampled", False)):
             runs[mode] = run = run_jobs(exp, jobs, greedy, readout)
             err = np.abs(run["pans"] - run["targets"])
@@ -255,8 +272,16 @@ def evaluate(
             }
         curves = {}
         if exp.planner is not None and exp.planner.is_ready:
-            result["route"] = route_results(
-                exp.planner, runs["greedy"]["pans"], runs["greedy"]["distances"], exp.trial_length
+            # the planning robot's own routes, greedy, on the grid's presentations
+            key = READOUT_PANS[readout]
+            for env, stream in zip(exp.envs, start_streams, strict=True):
+                env.task.random.set_state(stream)
+            routed = run_jobs(exp, jobs, True, readout, route=exp.planned_route(key))
+            estimates = [
+                exp.planner.estimate(v, s[v]) for v, s in zip(routed["routes"], routed["pans"])
+            ]
+            result["route"] = route_summary(
+                exp.planner, routed["routes"], estimates, routed["distances"], exp.trial_length
             )
         if exp.distance.is_ready:
             grid_distances = runs["greedy"]["distances"]
