@@ -16,7 +16,10 @@ samples, held-out photographs), with the overrides printed beside it.
   robot keeps its nominal stride: the online error in body units before and after, and the
   presentations until it is back within 1.2× of its level before the spurt.
 
-    python -m parallax.tools.analysis.embodied RUN_OR_MULTIRUN… --out DIR
+    python -m parallax.tools.analysis.embodied RUN_OR_MULTIRUN… --out DIR [--cache DIR]
+
+With ``--cache``, each source's replays are kept there and reused while the source's eval is
+older, so a run added later costs only its own replays.
 """
 
 from __future__ import annotations
@@ -106,55 +109,74 @@ def recovery(online: Sequence[tuple[int, float, float]], start: int) -> dict:
     }
 
 
-def study(sources: Sequence[Path]) -> dict:
-    """Every replay of the table and the spurt, for each source run."""
+def study(sources: Sequence[Path], cache: Path | None = None) -> dict:
+    """Every replay of the table and the spurt, for each source run. With ``cache``, each
+    source's replays are kept there (``<run>.json``) and reused while its eval is older."""
     rows: list[dict] = []
     growth: list[dict] = []
     for source in sources:
-        cfg = load_run_config(source)
-        queue = int(cfg.distance.queue_size)
-        supervised = replay(source, [])
-        base = {"source": str(source), "seed": int(cfg.seed)}
-        rows.append(
-            {
-                **base,
-                "targets": "supervisor",
-                "overrides": [],
-                "final": eval_scores(supervised, FINAL_EVAL),
-                "before": eval_scores(supervised, BEFORE_EVAL),
-            }
-        )
-        for fraction in FRACTIONS:
-            for slip in SLIPS:
-                overrides = cell_overrides(queue, fraction, slip)
-                result = replay(source, overrides)
-                rows.append(
-                    {
-                        **base,
-                        "targets": "odometry",
-                        "walk_fraction": fraction,
-                        "stride_slip": slip,
-                        "overrides": overrides,
-                        "final": eval_scores(result, FINAL_EVAL),
-                        "before": eval_scores(result, BEFORE_EVAL),
-                    }
-                )
-                print(f"[embodied] {source.name} {' '.join(overrides)}: {rows[-1]['final']}")
-        overrides = growth_overrides(GROWTH_FACTOR, GROWTH_START_FRACTION)
-        result = replay(source, overrides)
-        start = round(GROWTH_START_FRACTION * int(cfg.train.presentations))
-        growth.append(
-            {
-                **base,
-                "overrides": overrides,
-                "growth_presentation": start,
-                "online": recovery(result["online"], start),
-                "final": eval_scores(result, FINAL_EVAL),
-                "before": eval_scores(result, BEFORE_EVAL),
-            }
-        )
-        print(f"[embodied] {source.name} growth: {growth[-1]['online']['before_pct']:.2f} %")
+        kept = None if cache is None else cache / f"{source.name}.json"
+        if kept is not None and kept.is_file() and kept.stat().st_mtime > _eval_time(source):
+            one = json.loads(kept.read_text())
+        else:
+            one = study_one(source)
+            if kept is not None:
+                kept.parent.mkdir(parents=True, exist_ok=True)
+                kept.write_text(json.dumps(one) + "\n")
+        rows += one["rows"]
+        growth += one["growth"]
     return {"rows": rows, "growth": growth}
+
+
+def _eval_time(source: Path) -> float:
+    path = source / FINAL_EVAL
+    return path.stat().st_mtime if path.is_file() else 0.0
+
+
+def study_one(source: Path) -> dict:
+    """The replays of one source run: the supervised learner, every cell, and the spurt."""
+    cfg = load_run_config(source)
+    queue = int(cfg.distance.queue_size)
+    supervised = replay(source, [])
+    base = {"source": str(source), "seed": int(cfg.seed)}
+    rows = [
+        {
+            **base,
+            "targets": "supervisor",
+            "overrides": [],
+            "final": eval_scores(supervised, FINAL_EVAL),
+            "before": eval_scores(supervised, BEFORE_EVAL),
+        }
+    ]
+    for fraction in FRACTIONS:
+        for slip in SLIPS:
+            overrides = cell_overrides(queue, fraction, slip)
+            result = replay(source, overrides)
+            rows.append(
+                {
+                    **base,
+                    "targets": "odometry",
+                    "walk_fraction": fraction,
+                    "stride_slip": slip,
+                    "overrides": overrides,
+                    "final": eval_scores(result, FINAL_EVAL),
+                    "before": eval_scores(result, BEFORE_EVAL),
+                }
+            )
+            print(f"[embodied] {source.name} {' '.join(overrides)}: {rows[-1]['final']}")
+    overrides = growth_overrides(GROWTH_FACTOR, GROWTH_START_FRACTION)
+    result = replay(source, overrides)
+    start = round(GROWTH_START_FRACTION * int(cfg.train.presentations))
+    growth = {
+        **base,
+        "overrides": overrides,
+        "growth_presentation": start,
+        "online": recovery(result["online"], start),
+        "final": eval_scores(result, FINAL_EVAL),
+        "before": eval_scores(result, BEFORE_EVAL),
+    }
+    print(f"[embodied] {source.name} growth: {growth['online']['before_pct']:.2f} %")
+    return {"rows": rows, "growth": [growth]}
 
 
 def _mean_sd(values: Sequence[float]) -> str:
@@ -248,10 +270,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("sources", nargs="+", help="finished supervised runs (or their folders)")
     parser.add_argument("--out", required=True, help="folder for embodied.json and the figure")
+    parser.add_argument(
+        "--cache", default=None, help="keep each source's replays here, for later calls to reuse"
+    )
     args = parser.parse_args(argv)
     try:
         sources = find_sources(args.sources)
-        results = study(sources)
+        results = study(sources, cache=Path(args.cache) if args.cache else None)
     except (ReplayError, FileNotFoundError, ValueError) as exc:
         print(f"embodied: error: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2
