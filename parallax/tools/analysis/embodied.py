@@ -257,7 +257,7 @@ def recovery_figure(results: dict, path: Path) -> None:
     ax.set_xlabel("presentation")
     ax.set_ylabel(f"online error, body units (%, mean of {ROLLING})")
     ax.set_title(f"stride × {GROWTH_FACTOR:g} at the dashed line; nominal stride unchanged")
-    if results["growth"]:
+    if ax.get_legend_handles_labels()[0]:
         ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)

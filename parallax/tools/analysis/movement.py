@@ -283,7 +283,8 @@ def figures(results: list[dict], out: Path) -> None:
             )
     ax.set_xlabel("distance (m)")
     ax.set_ylabel("positions visited before stopping")
-    ax.legend(fontsize=7)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "stops_by_distance.png", dpi=120)
     plt.close(fig)
