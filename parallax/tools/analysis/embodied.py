@@ -222,6 +222,11 @@ def table(results: dict) -> str:
     return "\n".join(lines)
 
 
+def _pct(scores: dict | None) -> str:
+    """A held-out total error, or — where the run has no such eval."""
+    return "—" if not scores else f"{scores['total_pct']:.2f}"
+
+
 def growth_table(results: dict) -> str:
     lines = [
         "| seed | online error before (%) | peak after (%) | at the end (%) | presentations to "
@@ -234,8 +239,7 @@ def growth_table(results: dict) -> str:
         lines.append(
             f"| {g['seed']} | {o['before_pct']:.2f} | {o['peak_pct']:.2f} | {o['end_pct']:.2f} | "
             f"{'not within the run' if recovered is None else recovered} | "
-            f"{(g['before'] or {}).get('total_pct', float('nan')):.2f} | "
-            f"{(g['final'] or {}).get('total_pct', float('nan')):.2f} |"
+            f"{_pct(g['before'])} | {_pct(g['final'])} |"
         )
     return "\n".join(lines)
 
@@ -317,7 +321,7 @@ def report_text(results: dict, argv: Sequence[str]) -> str:
             "",
             "Errors in body units: the estimate against the strides the grown body needs, "
             "× the nominal stride. Held-out before: the model at §5's perturbation (before the "
-            "spurt); after: at the end.",
+            "spurt; — where the run has no eval of it); after: at the end.",
             "",
             growth_table(results),
             "",
