@@ -318,6 +318,8 @@ class Trainer:
         total = int(cfg.train.presentations)
         resumed = bool(cfg.resume) and self.restore()
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        if not resumed:  # a start from scratch: no lines of an earlier start without a checkpoint
+            self.metrics_path.write_text("")
         (self.run_dir / RUN_CONFIG_NAME).write_text(OmegaConf.to_yaml(cfg, resolve=True))
         if self.perturbed:
             self.exp.set_perturbation(True)

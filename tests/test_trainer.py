@@ -184,6 +184,17 @@ def test_resume_drops_a_torn_log_line(tmp_path, tiny_overrides):
     ).read_text()
 
 
+def test_a_start_without_a_checkpoint_keeps_no_earlier_log_lines(tmp_path, tiny_overrides):
+    # a run stopped before its first checkpoint leaves lines but nothing to resume from
+    _train(tmp_path / "full", tiny_overrides)
+    (tmp_path / "part").mkdir()
+    (tmp_path / "part" / "metrics.jsonl").write_text('{"presentation": 1, "steps": 8}\n')
+    _train(tmp_path / "part", tiny_overrides)
+    assert (tmp_path / "part" / "metrics.jsonl").read_text() == (
+        tmp_path / "full" / "metrics.jsonl"
+    ).read_text()
+
+
 def test_sigkill_then_resume_gives_the_same_summary(tmp_path, tiny_overrides):
     overrides = tiny_overrides + ["train.presentations=10", "train.checkpoint_every=1"]
     ref = tmp_path / "ref"
