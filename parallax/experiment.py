@@ -108,6 +108,14 @@ def body_walkers(cfg: DictConfig) -> list[Walker]:
     return [Walker(seed=seed, **options) for seed in seeds]
 
 
+def truths_at(source, walker: Walker, physics, distances) -> np.ndarray:
+    """A perfect odometry learner's answers for panels at ``distances``: ``source``'s truth of
+    the slip-free walk of ``walker``'s body as it is now (parallax-eval and parallax-replay)."""
+    return np.array(
+        [source.truth(d, walker.reach_strides(physics, d)) for d in distances], dtype=np.float64
+    )
+
+
 class Experiment:
     """The world(s), coder, policy and distance learner of one run, built from a config."""
 
@@ -199,14 +207,10 @@ class Experiment:
     def distance_truths(self, distances: np.ndarray) -> np.ndarray:
         """What a perfect distance learner answers for panels at ``distances`` (robot 0's body
         as it is now): the distances themselves, or the odometry's slip-free reading."""
-        source = getattr(self.distance, "target_source", None)
         if not self.walks:
             return np.asarray(distances, dtype=np.float64)
-        physics, walker = self.envs[0].physics, self.walkers[0]
-        return np.array(
-            [source.truth(d, walker.reach_strides(physics, d)) for d in distances],
-            dtype=np.float64,
-        )
+        source = self.distance.target_source
+        return truths_at(source, self.walkers[0], self.envs[0].physics, distances)
 
     def sweeps(self, explore: float) -> bool:
         """Whether this presentation sweeps all of L: always without a planner or before its

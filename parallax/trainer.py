@@ -58,7 +58,6 @@ class Trainer:
         self.last_distance_stats: dict[str, float] = {}
         self.perturbation_start = perturbation_start(cfg)
         self.growth_start = growth_start(cfg)
-        self.last_walk: dict = {}
 
     # --- paths -----------------------------------------------------------------------------
     @property

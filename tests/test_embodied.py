@@ -3,14 +3,12 @@ walk and saves no walker; walking never changes what the eye does; an odometry r
 walks (None for a robot that stayed), its growth spurt and its first fit at distance.fit_from;
 parallax-replay reproduces a walking run and replays a supervised one as an odometry run;
 resuming gives the numbers of an uninterrupted run; bad env.walk / odometry values are refused
-naming the key (in-process and by parallax-train)."""
+naming the key (in-process; parallax-train in tests/config/test_bad_input.py)."""
 
 from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -308,22 +306,3 @@ def test_the_walking_settings_of_these_tests_validate():
     validate(compose(TINY + WALKING))
     validate(compose(["distance.targets=odometry", "distance.fit_from=300"]))
     validate(compose(["experiment=embodied_growth"]))
-
-
-def test_parallax_train_stops_with_one_line_for_a_bad_slip(tmp_path):
-    script = Path(sys.executable).with_name("parallax-train")
-    command = [str(script)] if script.exists() else [sys.executable, "-m", "parallax.train"]
-    run_dir = tmp_path / "run"
-    proc = subprocess.run(
-        command + ["env.walk.stride_slip=0.6", f"hydra.run.dir={run_dir}"],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        timeout=300,
-    )
-    lines = [line for line in proc.stderr.splitlines() if line.strip()]
-    assert proc.returncode == 2, proc.stderr
-    assert len(lines) == 1, proc.stderr
-    assert lines[0].startswith("parallax-train: error: env.walk.stride_slip=0.6"), lines[0]
-    assert "Traceback" not in proc.stderr + proc.stdout
-    assert not run_dir.exists()

@@ -46,7 +46,7 @@ from parallax.config import (
     run_name,
 )
 from parallax.envs.walk import walk_robots
-from parallax.experiment import body_walkers, distance_learner, worlds
+from parallax.experiment import body_walkers, distance_learner, truths_at, worlds
 from parallax.metrics import DistanceErrorTracker, learn_online
 from parallax.tools.report.runs import (
     METRICS_NAME,
@@ -253,9 +253,9 @@ class _Body:
 
     def truths(self, source, distances: Sequence[float], grown: bool) -> list[float]:
         """A perfect learner's answers for panels at ``distances`` with the body grown or not."""
-        walker, physics = copy.deepcopy(self.walkers[0]), self.envs[0].physics
+        walker = copy.deepcopy(self.walkers[0])
         walker.grown = grown
-        return [source.truth(d, walker.reach_strides(physics, d)) for d in distances]
+        return truths_at(source, walker, self.envs[0].physics, distances).tolist()
 
     def close(self) -> None:
         for env in self.envs:

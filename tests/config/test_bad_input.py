@@ -42,6 +42,8 @@ COMMAND_LINES = [
     ("foo.bar=1", "foo.bar=1"),
     ("train.presentaions=5", "train.presentaions=5"),
     ("experiment=nope", "experiment=nope"),
+    ("env.walk.stride_slip=0.6", "env.walk.stride_slip=0.6"),
+    ("movement.explore=0", "movement.explore=0.0"),
 ]
 
 
