@@ -136,6 +136,7 @@ class MultiScaleCoder(nn.Module):
         normalisation: str = "per_half",
         learn: bool = True,
         pursuit: str = "gram",
+        robot_updates: str = "mean",
     ) -> None:
         super().__init__()
         if isinstance(scales, str) or not isinstance(scales, Sequence) or len(scales) == 0:
@@ -166,7 +167,14 @@ class MultiScaleCoder(nn.Module):
                 )
             generator = torch.Generator().manual_seed(scale_seed(int(seed), name))
             coders[name] = ScaleCoder(
-                spec, atoms, sparsity, learning_rate, normalisation, generator, pursuit
+                spec,
+                atoms,
+                sparsity,
+                learning_rate,
+                normalisation,
+                generator,
+                pursuit,
+                robot_updates,
             )
         self.scales = scales
         self.atoms = atoms

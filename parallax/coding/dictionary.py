@@ -4,7 +4,8 @@
   as the ROWS of an (N, K) tensor;
 * one gradient step on the reconstruction error after each encoding, then renormalisation of
   every atom (§3.3, last paragraph): ΔΦ = η·R·Bᵀ/P with atoms as columns, i.e.
-  Φ ← Φ + (η/P)·Bᵀ·R with atoms as rows, R the (P, K) residuals, B the (P, N) codes;
+  Φ ← Φ + (η/P)·Bᵀ·R with atoms as rows, R the (P, K) residuals, B the (P, N) codes; for B
+  robots in lockstep either the mean of their steps or (beyond the paper) their sum;
 * pooled activity θ_n = mean_i b_{i,n}² (eqs. 2–3) and reconstruction error
   e = mean_i ‖γ_i − Φᵀb_i‖² / ‖γ_i‖² (eq. 4), where a zero patch (a flat region, see
   ``retina``) contributes 0: its 0/0 is defined as 0.
@@ -80,15 +81,22 @@ def gradient_step_(
     code: SparseCode | Sequence[SparseCode],
     learning_rate: float,
     kernel: str | None = None,
+    images: int = 1,
 ) -> None:
     """One step of gradient descent on ½‖γ − Φᵀb‖² averaged over the P coded patches, in place
-    (``code``: one code, or the codes of consecutive chunks of the patches)."""
+    (``code``: one code, or the codes of consecutive chunks of the patches).
+
+    ``images`` > 1 takes the sum of that many images' steps instead of their mean: the patches
+    come from that many images of equal size, and each image's step is η·Bᵀ·R/P of its own P
+    patches (B robots' experience counts B times; the atoms are renormalised once, after the
+    sum)."""
     chunks = [code] if isinstance(code, SparseCode) else list(code)
     patches = sum(chunk.residuals.shape[0] for chunk in chunks)
     if patches == 0:
         return
     dictionary.add_(
-        codes_times_residuals(chunks, dictionary.shape[0], kernel), alpha=learning_rate / patches
+        codes_times_residuals(chunks, dictionary.shape[0], kernel),
+        alpha=learning_rate * images / patches,
     )
     normalise_atoms_(dictionary)
 

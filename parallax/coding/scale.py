@@ -31,6 +31,10 @@ from .retina import ScaleSpec, prepare_reference, scale_patches, stack_pair
 #: (same results); "recompute": correlations recomputed from the residual at every step.
 PURSUITS = ("gram", "gram_cpp", "gram_torch", "recompute")
 _KERNELS = {"gram": None, "gram_cpp": "cpp", "gram_torch": "torch"}
+#: How the dictionary step of B robots in lockstep combines their patches: "mean", one step on
+#: the mean over all their patches (B robots teach as much as one); "sum" (beyond the paper),
+#: the sum of each robot's own step, so that every robot's experience counts in full.
+ROBOT_UPDATES = ("mean", "sum")
 
 
 @dataclass
@@ -56,10 +60,14 @@ class ScaleCoder(nn.Module):
         normalisation: str,
         generator: torch.Generator,
         pursuit: str = "gram",
+        robot_updates: str = "mean",
     ) -> None:
         super().__init__()
         if pursuit not in PURSUITS:
             raise ValueError(f"pursuit must be one of {PURSUITS}, got {pursuit!r}")
+        if robot_updates not in ROBOT_UPDATES:
+            raise ValueError(f"robot_updates must be one of {ROBOT_UPDATES}, got {robot_updates!r}")
+        self.robot_updates = robot_updates
         self.spec = spec
         self.sparsity = sparsity
         self.learning_rate = learning_rate
@@ -121,8 +129,19 @@ class ScaleCoder(nn.Module):
     @torch.no_grad()
     def learn_from(self, code: SparseCode | Sequence[SparseCode]) -> None:
         """One gradient step with all the coded patches (one code, or the codes of consecutive
-        chunks of robots, in order), then unit-norm atoms again."""
-        gradient_step_(self.dictionary, code, self.learning_rate, kernel=_KERNELS.get(self.pursuit))
+        chunks of robots, in order), then unit-norm atoms again: the mean of the robots' steps,
+        or their sum (``robot_updates``)."""
+        chunks = [code] if isinstance(code, SparseCode) else list(code)
+        images = 1
+        if self.robot_updates == "sum":
+            images = sum(chunk.residuals.shape[0] for chunk in chunks) // self.spec.patch_count
+        gradient_step_(
+            self.dictionary,
+            chunks,
+            self.learning_rate,
+            kernel=_KERNELS.get(self.pursuit),
+            images=max(images, 1),
+        )
         if self.pursuit != "recompute":
             # The next encoding's Gram matrix, now: in a lockstep this runs while the world
             # renders the next frames (parallax.experiment).

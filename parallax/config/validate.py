@@ -221,6 +221,9 @@ def _coder(check: _Checks) -> None:
     from parallax.coding.retina import NORMALISATIONS
 
     check.choice("coder.normalisation", NORMALISATIONS)
+    from parallax.coding.scale import ROBOT_UPDATES
+
+    check.choice("coder.robot_updates", ROBOT_UPDATES)
 
 
 def _policy(check: _Checks) -> None:
@@ -252,6 +255,9 @@ def _policy(check: _Checks) -> None:
     from parallax.policy.features import FEATURE_NORMS
 
     check.choice("policy.feature_norm", FEATURE_NORMS)
+    from parallax.policy.natural_actor_critic import ROBOT_UPDATES as POLICY_ROBOT_UPDATES
+
+    check.choice("policy.robot_updates", POLICY_ROBOT_UPDATES)
     check.integer("policy.zscore_horizon", 0, " (states; 0: all)")
     check.number("policy.eye_position_reference_m", at_least=0, what=" (metres; 0: off)")
     check.optional_number("policy.actor_projection_radius", above=0, what=" or null")

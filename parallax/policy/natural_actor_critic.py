@@ -13,8 +13,11 @@ in :mod:`parallax.policy.features`), with the reward R = −(eC + eF) of eq. (6)
     Θ ← Θ·(1 − α_p·λ) + α_p·w           actor, with weight decay λ
     π(a|φ) = softmax(Θφ / T) over A     eqs. (7)–(8)
 
-For a batch of B robots each row gives its own update from the same current parameters and the
-module applies their mean (J moves by the mean reward); with B = 1 that is exactly the equations.
+For a batch of B robots ``robot_updates`` says how their rows combine: "mean", each row gives its
+own update from the same current parameters and the module applies their mean (J moves by the
+mean reward); "in_turn" (beyond the paper), the rows' updates follow one another, each from the
+parameters the previous one left, as B steps of the algorithm. With B = 1 both are exactly the
+equations.
 Rows marked invalid (the first transition after a stimulus or lateral-position change, which
 would cross a reset) contribute nothing; a batch with no valid row changes nothing.
 """
@@ -34,6 +37,8 @@ from parallax.policy.features import REFERENCE_MODE, FeatureNormalizer
 
 #: The paper's pan increments in degrees (§3.4).
 PAPER_ACTIONS_DEG = (-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2)
+#: How the updates of B robots' rows combine (see the module docstring).
+ROBOT_UPDATES = ("mean", "in_turn")
 
 
 def _check_int(name: str, value: object, minimum: int) -> int:
@@ -96,8 +101,12 @@ class NaturalActorCritic(nn.Module):
         eye_position_reference_m: float = 0.5,
         reward_change_gain: float = 10.0,
         actor_projection_radius: float | None = None,
+        robot_updates: str = "mean",
     ) -> None:
         super().__init__()
+        if robot_updates not in ROBOT_UPDATES:
+            raise ValueError(f"robot_updates must be one of {ROBOT_UPDATES}, got {robot_updates!r}")
+        self.robot_updates = robot_updates
         state_dim = _check_int("state_dim", state_dim, minimum=1)
         num_scales = _check_int("num_scales", num_scales, minimum=1)
         action_list = [float(a) for a in actions]
@@ -369,13 +378,11 @@ class NaturalActorCritic(nn.Module):
 
         probabilities = torch.softmax(self._logits(features), dim=1)
         entropy = -(probabilities * torch.log(probabilities.clamp(min=1e-30))).sum(dim=1)
-        td_error = self._apply_update(
-            features[valid],
-            action[valid],
-            reward[valid],
-            next_features[valid],
-            probabilities[valid],
-        )
+        rows = (features[valid], action[valid], reward[valid], next_features[valid])
+        if self.robot_updates == "mean" or rows[0].shape[0] <= 1:
+            td_error = self._apply_update(*rows, probabilities[valid])
+        else:
+            td_error = self._apply_in_turn(*rows)
         valid_count = int(valid.sum())
         summary = torch.stack(
             [
@@ -446,6 +453,26 @@ class NaturalActorCritic(nn.Module):
         self.updates.add_(1)
         return td_error
 
+    def _apply_in_turn(
+        self,
+        features: torch.Tensor,
+        action: torch.Tensor,
+        reward: torch.Tensor,
+        next_features: torch.Tensor,
+    ) -> torch.Tensor:
+        """The rows' updates one after the other, each a single-row step from the parameters the
+        previous row left (π(·|φ) recomputed with the new Θ); returns their δ."""
+        td_errors = []
+        for row in range(features.shape[0]):
+            one = slice(row, row + 1)
+            probabilities = torch.softmax(self._logits(features[one]), dim=1)
+            td_errors.append(
+                self._apply_update(
+                    features[one], action[one], reward[one], next_features[one], probabilities
+                )
+            )
+        return torch.cat(td_errors)
+
     # ------------------------------------------------------------------ resume
 
     def get_extra_state(self) -> dict[str, Any]:
@@ -465,5 +492,5 @@ class NaturalActorCritic(nn.Module):
             f"T={self.temperature}, feature_norm={self.feature_norm!r}, "
             f"zscore_horizon={self.normalizer.horizon}, "
             f"eye_position_reference_m={self.eye_position_reference_m}, "
-            f"reward_change_gain={self.reward_change_gain}"
+            f"reward_change_gain={self.reward_change_gain}, robot_updates={self.robot_updates!r}"
         )

@@ -74,3 +74,22 @@ def test_cpu_radix_grouping_matches_the_torch_sort_used_elsewhere() -> None:
     general = stable_order(picks, 40_000)  # torch's stable argsort (any device)
     assert torch.equal(fast, general)
     assert torch.equal(picks[fast], torch.sort(picks, stable=True).values)
+
+
+def test_a_sum_of_robots_steps_is_one_step_per_image_of_its_own_patches() -> None:
+    # images=B: the step is η·Bᵀ·R/P per image of P patches, summed over the B images, i.e. B
+    # times the mean step before renormalisation; images=1 is the mean step itself.
+    dictionary = random_dictionary(40, 30, _generator(5), dtype=torch.float64)
+    patches = torch.randn(3 * 50, 30, generator=_generator(6), dtype=torch.float64)
+    code = matching_pursuit(patches, dictionary, sparsity=5)
+    summed, mean, scaled = dictionary.clone(), dictionary.clone(), dictionary.clone()
+    gradient_step_(summed, code, learning_rate=0.1, images=3)
+    gradient_step_(mean, code, learning_rate=0.1)
+    gradient_step_(scaled, code, learning_rate=0.3)
+    torch.testing.assert_close(summed, scaled)
+    assert not torch.allclose(summed, mean)
+    expected = dictionary + 0.1 * sum(
+        code.codes[i * 50 : (i + 1) * 50].T @ code.residuals[i * 50 : (i + 1) * 50] / 50
+        for i in range(3)
+    )
+    torch.testing.assert_close(summed, expected / expected.norm(dim=1, keepdim=True))

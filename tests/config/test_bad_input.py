@@ -150,6 +150,8 @@ BAD_VALUES = [
     # choices the components do not know
     ("policy.feature_norm=l2", "policy.feature_norm=l2"),
     ("coder.normalisation=both", "coder.normalisation=both"),
+    ("coder.robot_updates=in_turn", "coder.robot_updates=in_turn"),
+    ("policy.robot_updates=sum", "policy.robot_updates=sum"),
     ("distance.input_scaling=none", "distance.input_scaling=none"),
     ("distance.targets=oracle", "distance.targets=oracle"),
     ("train.distance_readout=peak", "train.distance_readout=peak"),

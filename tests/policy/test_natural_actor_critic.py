@@ -484,3 +484,40 @@ def test_the_policy_builds_its_state_from_what_the_robots_observe() -> None:
         _policy().state(theta, reference, pans, 0.05)
     # the paper's state: θ as the coder gives it
     assert _policy().state(theta, None, pans, 0.05) is theta
+
+
+def test_in_turn_applies_the_rows_updates_one_after_the_other() -> None:
+    # robot_updates=in_turn: the batch ends where single-row updates of the valid rows, one
+    # after the other, end; the mean of the same rows ends elsewhere.
+    in_turn, one_by_one, mean = _policy(robot_updates="in_turn"), _policy(), _policy()
+    for policy in (in_turn, one_by_one, mean):
+        _randomise(policy, seed=13)
+    phi, next_phi = _states(4, seed=14), _states(4, seed=15)
+    action, reward = torch.tensor([2, 5, 0, 6]), torch.tensor([-0.3, -0.8, -0.1, -0.6])
+    valid = torch.tensor([True, True, False, True])
+    stats = in_turn.update(phi, action, reward, next_phi, valid)
+    mean.update(phi, action, reward, next_phi, valid)
+    deltas = []
+    for row in torch.nonzero(valid).flatten().tolist():
+        one = slice(row, row + 1)
+        step = one_by_one.update(
+            phi[one], action[one], reward[one], next_phi[one], torch.tensor([True])
+        )
+        deltas.append(step["td_error"])
+    for name in ("critic", "advantage", "actor", "average_reward"):
+        torch.testing.assert_close(getattr(in_turn, name), getattr(one_by_one, name))
+        assert not torch.allclose(getattr(in_turn, name), getattr(mean, name))
+    assert stats["td_error"] == pytest.approx(sum(deltas) / len(deltas), rel=1e-6)
+    assert int(in_turn.updates) == 3 and int(mean.updates) == 1
+
+
+def test_in_turn_is_the_mean_for_one_robot() -> None:
+    in_turn, mean = _policy(robot_updates="in_turn"), _policy()
+    for policy in (in_turn, mean):
+        _randomise(policy, seed=16)
+    transition = (_states(1, seed=17), torch.tensor([4]), torch.tensor([-0.5]), _states(1, 18))
+    for policy in (in_turn, mean):
+        policy.update(*transition, torch.tensor([True]))
+    for name, value in mean.state_dict().items():
+        if isinstance(value, torch.Tensor):
+            assert torch.equal(in_turn.state_dict()[name], value), name
