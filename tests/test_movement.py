@@ -368,6 +368,27 @@ def evaluated(planned_run):
     return evaluate(planned_run, distances=EVAL_DISTANCES, between=[])
 
 
+def test_the_movement_analysis_reports_robots_that_planned_while_they_learnt(
+    planned_run, evaluated, tmp_path
+) -> None:
+    from parallax.tools.analysis import movement
+
+    out = tmp_path / "movement"
+    argv = [str(planned_run), "--out", str(out), "--prices", "0", "1e6", "--trained"]
+    assert movement.main([*argv, str(planned_run)]) == 0
+    results = json.loads((out / "movement.json").read_text())
+    (own,) = results["trained"]
+    assert own["route"]["by_range"] == evaluated["route"]["by_range"]
+    # the curve over the price: the run's own planner queue and eye, at each price
+    (curve,) = results["trained_curves"]
+    assert [p["price_per_trial"] for p in curve["planner"]] == [0.0, 1e6]
+    assert curve["planner"][1]["eye_movements"] == TRIAL_LENGTH  # a price no error can pay
+    page = (out / "README.md").read_text()
+    movements = own["route"]["eye_movements"]
+    assert f"{own['route']['by_range']['total']:.2f} % distance error with {movements:.0f}" in page
+    assert f"{movements / (len(LATERAL) * TRIAL_LENGTH):.0%} of the fixed 5-20 cm list" in page
+
+
 def _checkpoint_planner(run_dir: Path) -> MovementPlanner:
     state = checkpoint.load(run_dir / checkpoint.CHECKPOINT_NAME)["experiment"]
     planner = MovementPlanner(LATERAL, queue_size=QUEUE, price_per_trial=0.5)

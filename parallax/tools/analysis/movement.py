@@ -213,7 +213,32 @@ def trained_table(planned: list[dict], sweeping: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def report_text(results: list[dict], planned: list[dict], sweeping: list[dict], argv) -> str:
+def target_lines(planned: list[dict], sweeping_results: list[dict]) -> list[str]:
+    """The planned runs' own routes against the fixed 5–20 cm list's network, as measured."""
+    networks = [
+        r["network_error_pct"] for r in sweeping_results if r["network_error_pct"] is not None
+    ]
+    fixed = sweeping_results[0]["fixed_estimator"].get("5-20") if sweeping_results else None
+    if not networks or fixed is None or not planned:
+        return []
+    error = statistics.fmean(r["route"]["by_range"]["total"] for r in planned)
+    movements = statistics.fmean(r["route"]["eye_movements"] for r in planned)
+    network = statistics.fmean(networks)
+    return [
+        f"Planned while learning, its own routes: {error:.2f} % distance error with "
+        f"{movements:.0f} eye movements per presentation, {movements / fixed['eye_movements']:.0%} "
+        f"of the fixed 5-20 cm list's {fixed['eye_movements']:.0f}; the fixed list's network: "
+        f"{network:.2f} % (means over runs).",
+    ]
+
+
+def report_text(
+    results: list[dict],
+    planned: list[dict],
+    planned_curves: list[dict],
+    sweeping: list[dict],
+    argv,
+) -> str:
     sources = [r["source"] for r in results]
     parts = [
         "# The robot decides how far to move: results",
@@ -240,12 +265,24 @@ def report_text(results: list[dict], planned: list[dict], sweeping: list[dict], 
             "and evaluated by `parallax-eval RUN`:",
             *[f"- `{r['source']}`" for r in planned],
             "",
+            "Their own routes on the held-out presentations (parallax-eval), at the price they "
+            "learnt with:",
+            "",
             trained_table(planned, sweeping),
+            "",
+            *target_lines(planned, results),
+            "",
+            "Their eye and their planner's queue at every price, on the same held-out "
+            "presentations (the curve; the fixed lists as points):",
+            "",
+            table(planned_curves),
         ]
     return "\n".join(parts) + "\n"
 
 
-def figures(results: list[dict], out: Path) -> None:
+def figures(
+    results: list[dict], out: Path, planned_curves: Sequence[dict] = (), planned=()
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -263,6 +300,20 @@ def figures(results: list[dict], out: Path) -> None:
             for name, point in r["fixed_estimator"].items():
                 axis.scatter(point[key], point["error_pct"], marker="s", color="k")
                 axis.annotate(f"fixed {name} cm", (point[key], point["error_pct"]), fontsize=7)
+        for r in planned_curves:
+            xs = [p[key] for p in r["planner"]]
+            ys = [p["error_pct"] for p in r["planner"]]
+            axis.plot(
+                xs,
+                ys,
+                marker=".",
+                linestyle="--",
+                label=f"planned while learning, seed {r['seed']}",
+            )
+        for r in planned:
+            axis.scatter(
+                r["route"][key], r["route"]["by_range"]["total"], marker="*", s=90, zorder=3
+            )
         axis.set_xlabel(label)
         axis.set_ylabel("distance error (%)")
     axes[0].legend(fontsize=7)
@@ -281,6 +332,14 @@ def figures(results: list[dict], out: Path) -> None:
                 list(by.values()),
                 label=f"price {point['price_per_trial']:g}, seed {r['seed']}",
             )
+    for r in planned:
+        by = r["route"]["trials_by_distance"]
+        ax.plot(
+            [float(d) for d in by],
+            list(by.values()),
+            linestyle="--",
+            label=f"planned while learning (price {r['price_per_trial']:g}), seed {r['seed']}",
+        )
     ax.set_xlabel("distance (m)")
     ax.set_ylabel("positions visited before stopping")
     if ax.get_legend_handles_labels()[0]:
@@ -302,7 +361,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         sources = find_sources(args.sources)
         results = [curve(source, args.prices) for source in sources]
-        planned = [trained(run) for run in find_sources(args.trained)] if args.trained else []
+        trained_runs = find_sources(args.trained) if args.trained else []
+        planned = [trained(run) for run in trained_runs]
+        planned_curves = [curve(run, args.prices) for run in trained_runs]
         sweeping = [{"eye": _eye(s, held_out(s)[2])} for s in sources] if planned else []
     except (ReplayError, FileNotFoundError, ValueError) as exc:
         print(f"movement: error: {str(exc).splitlines()[0]}", file=sys.stderr)
@@ -310,10 +371,15 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "movement.json").write_text(
-        json.dumps({"replayed": results, "trained": planned}, indent=2) + "\n"
+        json.dumps(
+            {"replayed": results, "trained": planned, "trained_curves": planned_curves}, indent=2
+        )
+        + "\n"
     )
-    figures(results, out)
-    report = report_text(results, planned, sweeping, argv if argv is not None else sys.argv[1:])
+    figures(results, out, planned_curves, planned)
+    report = report_text(
+        results, planned, planned_curves, sweeping, argv if argv is not None else sys.argv[1:]
+    )
     (out / "README.md").write_text(report)
     print(report)
     return 0
