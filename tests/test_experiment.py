@@ -113,7 +113,7 @@ def test_robots_encoded_chunk_by_chunk_give_the_numbers_of_one_batch(
     [
         (1, []),
         (3, ["policy.feature_norm=difference", "policy.eye_position_reference_m=0.5"]),
-        (3, ["policy.robot_updates=in_turn", "coder.robot_updates=sum"]),
+        (3, ["policy.robot_updates=mean", "coder.robot_updates=mean"]),
     ],
 )
 def test_the_lockstep_gives_the_numbers_of_the_plain_loop(
@@ -143,9 +143,9 @@ def test_one_robot_learns_the_same_whichever_way_robots_updates_combine(
     tiny_overrides, monkeypatch
 ) -> None:
     overrides = tiny_overrides + ["env.initial_pan_jitter_deg=1"]
-    every_robot = ["policy.robot_updates=in_turn", "coder.robot_updates=sum"]
+    mean = ["policy.robot_updates=mean", "coder.robot_updates=mean"]
     _assert_same(
-        _presentations(overrides + every_robot, 2, monkeypatch),
+        _presentations(overrides + mean, 2, monkeypatch),
         _presentations(overrides, 2, monkeypatch),
     )
 

@@ -136,7 +136,7 @@ class MultiScaleCoder(nn.Module):
         normalisation: str = "per_half",
         learn: bool = True,
         pursuit: str = "gram",
-        robot_updates: str = "mean",
+        robot_updates: str = "sum",
     ) -> None:
         super().__init__()
         if isinstance(scales, str) or not isinstance(scales, Sequence) or len(scales) == 0:

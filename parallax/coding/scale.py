@@ -60,7 +60,7 @@ class ScaleCoder(nn.Module):
         normalisation: str,
         generator: torch.Generator,
         pursuit: str = "gram",
-        robot_updates: str = "mean",
+        robot_updates: str = "sum",
     ) -> None:
         super().__init__()
         if pursuit not in PURSUITS:

@@ -145,10 +145,10 @@ class CoderConfig:
     normalisation: str = "per_half"
     #: false freezes the dictionaries.
     learn: bool = True
-    #: B robots in lockstep: mean (one step on the mean over all their patches, so B robots teach
-    #: the dictionaries as much as one) | sum (beyond the paper: the sum of every robot's own
-    #: step). Either is the paper's step at env.robots=1.
-    robot_updates: str = "mean"
+    #: B robots in lockstep: sum (beyond the paper: the sum of every robot's own step, so every
+    #: robot's patches teach in full) | mean (one step on the mean over all their patches, so B
+    #: robots teach the dictionaries as much as one). Either is the paper's step at env.robots=1.
+    robot_updates: str = "sum"
     #: Filled by the trainer: the dictionaries' initialisation seed.
     seed: int = MISSING
     #: Filled by the trainer: env.image_size.
@@ -203,10 +203,10 @@ class PolicyConfig:
     #: Algorithm 3's projection Γ of the actor parameters Θ onto the ball of this radius after
     #: each update (Bhatnagar et al. 2009); null: no projection, the weight decay λ bounds Θ.
     actor_projection_radius: float | None = None
-    #: B robots in lockstep: mean (the mean of their updates from the same parameters, so B
-    #: robots teach as much as one) | in_turn (beyond the paper: their B updates one after the
-    #: other, B steps of algorithm 3). Either is algorithm 3 itself at env.robots=1.
-    robot_updates: str = "mean"
+    #: B robots in lockstep: in_turn (beyond the paper: their B updates one after the other, B
+    #: steps of algorithm 3) | mean (the mean of their updates from the same parameters, so B
+    #: robots teach as much as one). Either is algorithm 3 itself at env.robots=1.
+    robot_updates: str = "in_turn"
     #: Filled by the trainer: seeds the action-sampling generator.
     seed: int = MISSING
 

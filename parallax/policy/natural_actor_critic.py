@@ -101,7 +101,7 @@ class NaturalActorCritic(nn.Module):
         eye_position_reference_m: float = 0.5,
         reward_change_gain: float = 10.0,
         actor_projection_radius: float | None = None,
-        robot_updates: str = "mean",
+        robot_updates: str = "in_turn",
     ) -> None:
         super().__init__()
         if robot_updates not in ROBOT_UPDATES:

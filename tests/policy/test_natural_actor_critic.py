@@ -106,7 +106,7 @@ def test_single_robot_update_is_exactly_algorithm_3(norm: str) -> None:
 
 
 def test_batched_update_is_the_mean_of_single_robot_updates_over_valid_rows() -> None:
-    batched, single = _policy(), _policy()
+    batched, single = _policy(robot_updates="mean"), _policy()
     for policy in (batched, single):
         _randomise(policy, seed=9)
     phi, next_phi = _states(4, seed=10), _states(4, seed=11)
@@ -489,7 +489,8 @@ def test_the_policy_builds_its_state_from_what_the_robots_observe() -> None:
 def test_in_turn_applies_the_rows_updates_one_after_the_other() -> None:
     # robot_updates=in_turn: the batch ends where single-row updates of the valid rows, one
     # after the other, end; the mean of the same rows ends elsewhere.
-    in_turn, one_by_one, mean = _policy(robot_updates="in_turn"), _policy(), _policy()
+    in_turn, one_by_one = _policy(robot_updates="in_turn"), _policy()
+    mean = _policy(robot_updates="mean")
     for policy in (in_turn, one_by_one, mean):
         _randomise(policy, seed=13)
     phi, next_phi = _states(4, seed=14), _states(4, seed=15)
@@ -512,7 +513,7 @@ def test_in_turn_applies_the_rows_updates_one_after_the_other() -> None:
 
 
 def test_in_turn_is_the_mean_for_one_robot() -> None:
-    in_turn, mean = _policy(robot_updates="in_turn"), _policy()
+    in_turn, mean = _policy(robot_updates="in_turn"), _policy(robot_updates="mean")
     for policy in (in_turn, mean):
         _randomise(policy, seed=16)
     transition = (_states(1, seed=17), torch.tensor([4]), torch.tensor([-0.5]), _states(1, 18))
