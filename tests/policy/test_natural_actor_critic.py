@@ -522,3 +522,35 @@ def test_in_turn_is_the_mean_for_one_robot() -> None:
     for name, value in mean.state_dict().items():
         if isinstance(value, torch.Tensor):
             assert torch.equal(in_turn.state_dict()[name], value), name
+
+
+@pytest.mark.parametrize("overrides", [{}, dict(critic_lr=1.0, advantage_lr=0.1, actor_lr=0.1)])
+def test_in_turn_through_gram_matrices_is_the_row_by_row_loop(overrides: dict) -> None:
+    # 16 rows: what each row sees of the earlier rows' steps is carried through ΦΦᵀ and ΦΦ′ᵀ
+    fast, loop = _policy(**overrides), _policy(**overrides)
+    for policy in (fast, loop):
+        _randomise(policy, seed=19)
+    phi, next_phi = _states(16, seed=20), _states(16, seed=21)
+    action = torch.randint(0, 7, (16,), generator=torch.Generator().manual_seed(22))
+    reward = -torch.rand(16, generator=torch.Generator().manual_seed(23))
+    rows = (fast.features(phi), action, reward, fast.features(next_phi))
+    deltas = fast._apply_in_turn(*rows)
+    torch.testing.assert_close(deltas, loop._apply_row_by_row(*rows), rtol=1e-4, atol=1e-5)
+    for name in ("critic", "advantage", "actor", "average_reward"):
+        torch.testing.assert_close(getattr(fast, name), getattr(loop, name), rtol=1e-4, atol=1e-5)
+    assert int(fast.updates) == int(loop.updates) == 16
+
+
+def test_in_turn_projects_each_rows_step_when_a_radius_is_set() -> None:
+    in_turn, one_by_one = _policy(actor_projection_radius=0.5), _policy(actor_projection_radius=0.5)
+    for policy in (in_turn, one_by_one):
+        _randomise(policy, seed=24)
+    phi, next_phi = _states(3, seed=25), _states(3, seed=26)
+    action, reward = torch.tensor([1, 4, 6]), torch.tensor([-0.2, -0.7, -0.4])
+    in_turn.update(phi, action, reward, next_phi, torch.ones(3, dtype=torch.bool))
+    for row in range(3):
+        one = slice(row, row + 1)
+        one_by_one.update(phi[one], action[one], reward[one], next_phi[one], torch.tensor([True]))
+    assert float(in_turn.actor.norm()) <= 0.5 + 1e-6
+    for name in ("critic", "advantage", "actor", "average_reward"):
+        assert torch.equal(getattr(in_turn, name), getattr(one_by_one, name)), name

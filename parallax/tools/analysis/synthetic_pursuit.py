@@ -184,6 +184,8 @@ PUBLISHED = dict(
     zscore_horizon=0,
     eye_position_reference_m=0.0,
     reward_change_gain=0.0,
+    # the study's robots are a minibatch: one update per step, the mean of theirs
+    robot_updates="mean",
 )
 
 
