@@ -103,8 +103,8 @@ def test_learning_updates_after_encoding_and_keeps_atoms_unit_norm() -> None:
     assert torch.equal(coder.dictionaries["coarse"], snapshot)
 
 
-def test_a_batch_update_averages_over_all_patches_of_all_images() -> None:
-    single, double = _coder(), _coder()
+def test_a_mean_batch_update_averages_over_all_patches_of_all_images() -> None:
+    single, double = _coder(), _coder(robot_updates="mean")
     image = _photo_batch(1)
     single.set_reference(image)
     double.set_reference(np.concatenate([image, image]))
@@ -113,6 +113,20 @@ def test_a_batch_update_averages_over_all_patches_of_all_images() -> None:
     for name in ("coarse", "fine"):
         torch.testing.assert_close(
             single.dictionaries[name], double.dictionaries[name], atol=1e-6, rtol=0
+        )
+
+
+def test_a_summed_batch_update_is_each_images_step_added_up() -> None:
+    # two images that are the same: the sum is one image's step at twice η
+    summed, twice = _coder(), _coder(learning_rate=0.4)
+    image = _photo_batch(1)
+    summed.set_reference(np.concatenate([image, image]))
+    twice.set_reference(image)
+    summed(np.concatenate([image, image]))
+    twice(image)
+    for name in ("coarse", "fine"):
+        torch.testing.assert_close(
+            summed.dictionaries[name], twice.dictionaries[name], atol=1e-6, rtol=0
         )
 
 
