@@ -9,10 +9,11 @@ is spent, and reports the robot-iterations (environment steps × B) and the wall
 The cases take turns, one presentation each per round, so that every B sees the same machine;
 a case's wall time is the sum of its own presentations'. Medians over seeds.
 
-Only trials that start from pan 0 count, as in the paper's tables (a config that jitters every
-presentation, ``train.start_jitter_presentations=null``, counts them all). A recipe's jittered
-presentations N are lived through by B robots B times over; the benchmark gives each B the same
-jittered experience per robot-iteration, ⌈N/B⌉ presentations. §5's perturbation is off.
+Every trial counts, as in the trainer's ``mae_recent_per_position``: an eye that only pursues
+from pan 0 has not learnt. A recipe's N jittered presentations
+(``train.start_jitter_presentations``) are lived through by B robots B times over; the benchmark
+gives each B the same jittered experience per robot-iteration, ⌈N/B⌉ presentations. §5's
+perturbation is off.
 
     python -m parallax.tools.bench.learning [--robots 1 4 16] [--seeds 0 1 2]
         [--threshold 0.3] [--budget 200000] [--json FILE] [OVERRIDES…]
@@ -39,7 +40,7 @@ from pathlib import Path
 
 import torch
 
-from parallax.config import compose, start_jitter_on
+from parallax.config import compose
 from parallax.metrics import EyeMovementTracker
 
 DEFAULT_EXPERIMENT = "experiment=recipe_single_5"
@@ -63,19 +64,14 @@ class Case:
 
     def step(self) -> None:
         trainer = self.trainer
-        # a config that jitters every presentation (null) has no pan-0 trials: all of them count
-        counted = trainer.cfg.train.start_jitter_presentations is None or not start_jitter_on(
-            trainer.cfg, trainer.presentation
-        )
         start = time.perf_counter()
         pres, _ = trainer.step_presentation(keep_view=False)
         self.wall_s += time.perf_counter() - start
         self.presentations += 1
         self.robot_iterations += pres.steps * self.robots
-        if counted:
-            for b in range(self.robots):
-                for p, label in enumerate(pres.labels):
-                    self.eye.record(label, pres.pans[b, p], pres.targets[b, p])
+        for b in range(self.robots):
+            for p, label in enumerate(pres.labels):
+                self.eye.record(label, pres.pans[b, p], pres.targets[b, p])
         cells = self.eye.last_trials(self.window).values()
         full = all(cell["trials"] >= self.window for cell in cells)
         worst = max(cell["mean"] for cell in cells)
