@@ -9,8 +9,8 @@ is spent, and reports the robot-iterations (environment steps × B) and the wall
 The cases take turns, one presentation each per round, so that every B sees the same machine;
 a case's wall time is the sum of its own presentations'. Medians over seeds.
 
-Every trial counts, as in the trainer's ``mae_recent_per_position``: an eye that only pursues
-from pan 0 has not learnt. A recipe's N jittered presentations
+Every trial counts: the cases read the trainer's own eye-movement tracker (an eye that only pursues
+from pan 0 has not learnt). A recipe's N jittered presentations
 (``train.start_jitter_presentations``) are lived through by B robots B times over; the benchmark
 gives each B the same jittered experience per robot-iteration, ⌈N/B⌉ presentations. §5's
 perturbation is off.
@@ -35,47 +35,46 @@ import sys
 import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import torch
 
 from parallax.config import compose
-from parallax.metrics import EyeMovementTracker
+
+if TYPE_CHECKING:
+    from parallax.trainer import Trainer
 
 DEFAULT_EXPERIMENT = "experiment=recipe_single_5"
 
 
 @dataclass
 class Case:
-    """One B and seed: its trainer, its own tracker of pan-0 trials, and what it has spent."""
+    """One B and seed: its trainer, whose eye-movement tracker holds every trial, the MAE window
+    and threshold it must meet, and what it has spent."""
 
     robots: int
     seed: int
-    trainer: object
-    eye: EyeMovementTracker
+    trainer: Trainer
     window: int
     threshold: float
     robot_iterations: int = 0
     presentations: int = 0
     wall_s: float = 0.0
     learnt: bool = False
-    worst_mae: list[float] = field(default_factory=list)
+    worst_mae: float = math.nan  # over the last ``window`` trials, once every position has them
 
     def step(self) -> None:
-        trainer = self.trainer
         start = time.perf_counter()
-        pres, _ = trainer.step_presentation(keep_view=False)
+        pres, _ = self.trainer.step_presentation(keep_view=False)
         self.wall_s += time.perf_counter() - start
         self.presentations += 1
         self.robot_iterations += pres.steps * self.robots
-        for b in range(self.robots):
-            for p, label in enumerate(pres.labels):
-                self.eye.record(label, pres.pans[b, p], pres.targets[b, p])
-        cells = self.eye.last_trials(self.window).values()
+        cells = self.trainer.eye.last_trials(self.window).values()
         full = all(cell["trials"] >= self.window for cell in cells)
         worst = max(cell["mean"] for cell in cells)
-        self.worst_mae.append(worst if full else math.nan)
+        self.worst_mae = worst if full else math.nan
         self.learnt = full and worst <= self.threshold
 
 
@@ -112,8 +111,7 @@ def run(
                 trainer = Trainer(cfg, stack.enter_context(tempfile.TemporaryDirectory()))
                 stack.callback(trainer.exp.close)
                 window = int(cfg.metrics.summary_trials)
-                eye = EyeMovementTracker(trainer.exp.lateral_positions, window=window)
-                cases.append(Case(b, seed, trainer, eye, window, threshold=threshold))
+                cases.append(Case(b, seed, trainer, window, threshold=threshold))
         bar = tqdm(
             total=len(cases),
             desc="cases learnt or out of budget",
@@ -130,9 +128,9 @@ def run(
             if progress and running:
                 bar.set_postfix_str(
                     " ".join(
-                        f"B={c.robots}/s{c.seed}:{c.worst_mae[-1]:.2f}°"
+                        f"B={c.robots}/s{c.seed}:{c.worst_mae:.2f}°"
                         for c in running
-                        if not math.isnan(c.worst_mae[-1])
+                        if not math.isnan(c.worst_mae)
                     ),
                     refresh=False,
                 )
