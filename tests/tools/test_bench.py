@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import pytest
@@ -71,6 +72,12 @@ def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
     assert 0 < one["busy_cores"] <= report["ceiling"]["cpu"]["cores"] * 1.01
     assert one["steps_per_second_all_cores_busy"] >= one["steps_per_second"] * 0.99
     assert one["steps_per_second_min"] == one["steps_per_second"] == one["steps_per_second_max"]
+    # which thread spent it: the step's own thread and the GL thread's worlds at least, and
+    # together about the process's CPU time (the threads' clocks tick in 1/100 s)
+    by_thread = one["cpu_ms_per_robot_iteration_by_thread"]
+    assert by_thread["main"] > 0 and by_thread["GL thread"] > 0
+    assert sum(by_thread.values()) == pytest.approx(one["cpu_ms_per_robot_iteration"], rel=0.25)
+    assert "CPU per robot-iteration by thread" in printed
     ceiling = report["ceiling"]["cpu"]
     assert ceiling["render_cpu_ms_per_frame"] > 0
     assert ceiling["B=1"]["steps_per_second"] == pytest.approx(
@@ -92,3 +99,20 @@ def test_show_prints_a_committed_report_without_measuring(name, capsys):
     for dev, by_b in report["end_to_end"].items():
         for b, case in by_b.items():
             assert f"{dev} {b:<6} {case['steps_per_second']:>8.1f} steps/s" in printed
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads Linux's /proc")
+def test_threads_are_told_apart_by_the_part_of_the_step_they_run():
+    from parallax.tools.bench.timing import cpu_seconds_by_role, seconds_between, thread_role
+
+    assert thread_role("MainThread") == "main"
+    assert thread_role("parallax-scale_0") == "coder helper"
+    assert thread_role("parallax-gl") == "GL thread"
+    assert thread_role("llvmpipe-1") == "rasteriser"
+    assert thread_role("pt_main_thread") == "other"
+    before = cpu_seconds_by_role()
+    deadline = time.process_time() + 0.1
+    while time.process_time() < deadline:  # 0.1 s of this thread's CPU
+        pass
+    spent = seconds_between(before, cpu_seconds_by_role())
+    assert 0.05 <= spent["main"] <= 0.5

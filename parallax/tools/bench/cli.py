@@ -8,8 +8,9 @@ Prints a readable table and writes JSON of
   robots in lockstep, on the CPU (and CUDA when present);
 - the roofline of this machine for one step of the coder: its floating-point work and memory
   traffic divided by the measured matmul throughput and memory bandwidth;
-- where the whole step's time goes on the CPU: the process's CPU time per robot-iteration, how
-  many cores it kept busy, and the rate if every core were busy (what scheduling could give);
+- where the whole step's time goes on the CPU: the process's CPU time per robot-iteration, which
+  thread spent it, how many cores it kept busy, and the rate if every core were busy (what
+  scheduling could give);
 - the step's ceiling on this machine: the coder at its roofline bound, every frame at the CPU
   cost of a render measured alone, and every core busy — the most any schedule can give.
 
@@ -42,6 +43,7 @@ from parallax.tools.bench.limits import (
     render_cpu_ms_per_frame,
     usable_cores,
 )
+from parallax.tools.bench.timing import cpu_seconds_by_role, seconds_between
 
 
 # --- end to end ----------------------------------------------------------------------------------
@@ -81,17 +83,23 @@ def end_to_end(
             trainer.step_presentation(keep_view=False)  # warm-up: first calls allocate and compile
             trainers[b] = trainer
         samples = {
-            b: {"rates": [], "step_ms": [], "trainer_rates": [], "cpu_ms": []} for b in robots
+            b: {"rates": [], "step_ms": [], "trainer_rates": [], "cpu_ms": [], "by_thread": []}
+            for b in robots
         }
         for _ in range(presentations):
             for b, trainer in trainers.items():
                 timed = samples[b]
+                threads = cpu_seconds_by_role()
                 t, cpu = time.perf_counter(), time.process_time()
                 pres = trainer.exp.run_presentation()
                 dt, cpu = time.perf_counter() - t, time.process_time() - cpu
+                threads = seconds_between(threads, cpu_seconds_by_role())
                 timed["rates"].append(pres.steps * b / dt)
                 timed["step_ms"].append(dt / pres.steps * 1e3)
                 timed["cpu_ms"].append(cpu / (pres.steps * b) * 1e3)
+                timed["by_thread"].append(
+                    {role: s / (pres.steps * b) * 1e3 for role, s in threads.items()}
+                )
                 t = time.perf_counter()
                 pres, _ = trainer.step_presentation(keep_view=False)
                 timed["trainer_rates"].append(pres.steps * b / (time.perf_counter() - t))
@@ -112,6 +120,11 @@ def end_to_end(
             "cores": cores,
             # the same work with every core busy all the time: what scheduling could still give
             "steps_per_second_all_cores_busy": cores / cpu_per_iteration * 1e3,
+            # which thread spent it (parallax.tools.bench.timing.THREAD_ROLES); Linux only
+            "cpu_ms_per_robot_iteration_by_thread": {
+                role: statistics.median(p.get(role, 0.0) for p in timed["by_thread"])
+                for role in dict.fromkeys(r for p in timed["by_thread"] for r in p)
+            },
         }
     return results
 
@@ -240,6 +253,10 @@ def format_report(report: dict) -> str:
                     f"{r['steps_per_second_all_cores_busy']:.1f} "
                     f"steps/s if all {cores} were"
                 )
+            by_thread = r.get("cpu_ms_per_robot_iteration_by_thread")
+            if by_thread:
+                spent = ", ".join(f"{role} {ms:.2f}" for role, ms in by_thread.items())
+                lines.append(f"  {dev} {b:<6} CPU per robot-iteration by thread, ms: {spent}")
     for dev, rf in report["roofline"].items():
         lockstep = (
             f"; a lockstep of 16 robots {rf['coder_bound_ms_B16']:.3f} ms "

@@ -1,14 +1,18 @@
 """Timing for the benchmarks (`parallax-bench` and each sub-package's ``benchmark.run``).
 
 Operations are timed in turn, round after round, so that all of them see the same machine
-load; medians, not means, because a shared machine's noise comes in bursts.
+load; medians, not means, because a shared machine's noise comes in bursts. The CPU time of a
+whole step is split by thread (:func:`cpu_seconds_by_role`): which part of the step runs where.
 """
 
 from __future__ import annotations
 
+import os
 import statistics
+import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 
 def interleaved_medians_ms(
@@ -25,3 +29,44 @@ def interleaved_medians_ms(
             operation()
             samples[name].append((time.perf_counter() - start) * 1e3)
     return {name: statistics.median(values) for name, values in samples.items()}
+
+
+#: The threads of a step by the part of it they run (docs/performance.md, "How a step is
+#: scheduled"), matched on the thread's name: Python's for threads it started, else the system's.
+THREAD_ROLES = (
+    ("MainThread", "main"),  # retina and the first scale, the policy, the records
+    ("parallax-scale", "coder helper"),  # the second scale, the dictionary step
+    ("parallax-gl", "GL thread"),  # the worlds' steps and their draw calls
+    ("llvmpipe", "rasteriser"),  # Mesa's rasteriser threads
+)
+
+
+def thread_role(name: str) -> str:
+    return next((role for prefix, role in THREAD_ROLES if name.startswith(prefix)), "other")
+
+
+def cpu_seconds_by_role() -> dict[str, float]:
+    """CPU seconds (user + system) each role's threads of this process have used so far, read
+    from /proc (Linux); empty where there is no /proc/self/task."""
+    tasks = Path("/proc/self/task")
+    if not tasks.is_dir():
+        return {}
+    names = {str(thread.native_id): thread.name for thread in threading.enumerate()}
+    tick = os.sysconf("SC_CLK_TCK")
+    seconds: dict[str, float] = {}
+    for task in tasks.iterdir():
+        try:
+            stat = (task / "stat").read_text()
+            name = names.get(task.name) or (task / "comm").read_text().strip()
+        except OSError:  # the thread ended meanwhile
+            continue
+        fields = stat[stat.rindex(")") + 2 :].split()  # after "pid (comm) "
+        role = thread_role(name)
+        seconds[role] = seconds.get(role, 0.0) + (int(fields[11]) + int(fields[12])) / tick
+    return seconds
+
+
+def seconds_between(before: dict[str, float], after: dict[str, float]) -> dict[str, float]:
+    """What each role used between two :func:`cpu_seconds_by_role` readings (a thread that
+    ended in between takes its time with it)."""
+    return {role: after[role] - before.get(role, 0.0) for role in after}
