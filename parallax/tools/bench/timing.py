@@ -42,6 +42,7 @@ THREAD_ROLES = (
 
 
 def thread_role(name: str) -> str:
+    """The role of a thread called ``name``: the first of :data:`THREAD_ROLES` it starts with."""
     return next((role for prefix, role in THREAD_ROLES if name.startswith(prefix)), "other")
 
 
