@@ -1,19 +1,26 @@
 #!/usr/bin/env bash
-# Reproduces the results report (docs/results/README.md): every experiment of a family for every
-# seed, parallax-eval of each finished multiple-position run before and after the perturbation,
-# the committed checkpoints, and the report. A family is a prefix of the experiment files in
-# conf/experiment/:
-#     bash launch/reproduce.sh              # recipe: ours (recipe_*.yaml)
-#     bash launch/reproduce.sh paper        # the paper's algorithm as written (paper_*.yaml)
-#     bash launch/reproduce.sh recipe paper # both
-# Each run is `parallax-train experiment=<family>_<setup> seed=<n>`; nothing is added here.
+# Reproduces the results report (docs/results/): every experiment of a family for every seed,
+# parallax-eval of each multiple-position model before and after the perturbation, the committed
+# checkpoints, and the reports. A family is a prefix of the experiment files in conf/experiment/:
+#     bash launch/reproduce.sh                      # recipe, paper and without, then the report
+#     bash launch/reproduce.sh paper                # the paper's algorithm as written (paper_*)
+#     bash launch/reproduce.sh recipe               # ours (recipe_*)
+#     bash launch/reproduce.sh without              # the recipe less each improvement (without_*)
+# Each run is `parallax-train experiment=<name> seed=<n>`; nothing is added here. An experiment
+# that differs from another only in the distance learner (python -m parallax.tools.experiments)
+# is not trained: parallax-replay of the other's runs gives exactly its results.
+# Seeds: SEEDS (default 0,1,2); the 5–20 cm experiments of recipe and paper, the headline rows,
+# HEADLINE_SEEDS (default 0,1,2,3,4).
 # Arguments with '=' are Hydra overrides for every run (e.g. train.presentations=20 for a
 # smoke test); the others name families.
 # Resumable: each family's runs live in a fixed folder ($SWEEP_ROOT/reproduce_<family>) and
-# continue from their checkpoints. Extra settings: launch/ablation_lib.sh (LAUNCHER, N_JOBS,
-# SEEDS, SWEEP_ROOT, REPORT_ROOT, PARALLAX_DRY_RUN), plus
-#   EVAL_ARGS   parallax-eval options (default: the grid 3.0, 3.5, …, 10.0 m, three held-out
-#               photographs per distance)
+# continue from their checkpoints; a model is evaluated again only when its checkpoint is newer
+# than its eval. Extra settings: launch/ablation_lib.sh (LAUNCHER, N_JOBS, SWEEP_ROOT,
+# REPORT_ROOT, PARALLAX_DRY_RUN), plus
+#   EVAL_ARGS   parallax-eval options of every model (default: held-out photographs, one per
+#               distance of the grid 3.0, 3.1, …, 10.0 m, and 35 distances between its points)
+#   OTHER_ARGS  parallax-eval options for textures of another kind (default: the grid 3.0, 3.2,
+#               …, 10.0 m, greedy only), on the recipe's and the paper's 5–20 cm models
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
@@ -22,39 +29,129 @@ for arg in "$@"; do
   if [[ "$arg" == *=* ]]; then overrides+=("$arg"); else families+=("$arg"); fi
 done
 if (( ${#families[@]} == 0 )); then
-  families=(recipe)
+  families=(recipe paper without)
 fi
-read -ra eval_args <<< "${EVAL_ARGS:---distances 3.0 3.5 4.0 4.5 5.0 5.5 6.0 6.5 7.0 7.5 8.0 8.5 9.0 9.5 10.0 --textures 3}"
+read -ra eval_args <<< "${EVAL_ARGS:---robots 16 --between $(LC_ALL=C seq -s ' ' -f '%.2f' 3.05 0.2 9.85)}"
+read -ra other_args <<< "${OTHER_ARGS:---robots 16 --greedy-only --between --distances $(LC_ALL=C seq -s ' ' -f '%.1f' 3.0 0.2 10.0)}"
+# textures of another kind than the photographs: generated ones, and a folder of photographs of
+# other subjects that neither split uses (matplotlib's and scikit-image's sample images)
+other_folder="$(px_sweep_dir stimuli_other)"
+if [[ -z "${PARALLAX_DRY_RUN:-}" && ! -d "$other_folder" ]]; then
+  mkdir -p "$other_folder"
+  python - "$other_folder" <<'EOF'
+import shutil, sys
+from pathlib import Path
+import matplotlib, skimage
+mpl, ski = Path(matplotlib.get_data_path()) / "sample_data", Path(skimage.__file__).parent / "data"
+for path in (mpl / "grace_hopper.jpg", mpl / "Minduka_Present_Blue_Pack.png",
+             ski / "clock_motion.png", ski / "hubble_deep_field.jpg", ski / "microaneurysms.png",
+             ski / "chessboard_RGB.png"):
+    shutil.copy(path, sys.argv[1])
+EOF
+fi
+other_kinds=(
+  "procedural:env.stimuli.source=procedural env.stimuli.kind=dead_leaves"
+  "other_photos:env.stimuli.dir=$other_folder env.stimuli.count=null"
+)
+
 status=0
+evals=()  # one parallax-eval command line each, run N_JOBS at a time
+queue_eval() {  # RUN CHECKPOINT OUT ARGS...: queue an eval unless OUT/eval.json is newer
+  local run="$1" ckpt="$2" out="$3"
+  shift 3
+  if [[ -n "${PARALLAX_DRY_RUN:-}" || ( -f "$run/$ckpt" && ! "$out/eval.json" -nt "$run/$ckpt" ) ]]; then
+    evals+=("$(printf '%q ' parallax-eval "$run" --checkpoint "$ckpt" --out "$out" "$@")")
+    eval_logs+=("$out/eval.log")
+  fi
+}
+eval_logs=()
+run_evals() {
+  (( ${#evals[@]} )) || return 0
+  if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
+    printf '%s\n' "${evals[@]}"
+  else
+    echo "[reproduce] ${#evals[@]} evaluations, ${N_JOBS:-2} at a time (logs: OUT/eval.log)"
+    local k jobs=()
+    for k in "${!evals[@]}"; do
+      jobs+=("mkdir -p $(printf '%q' "$(dirname "${eval_logs[$k]}")") && ${evals[$k]}> $(printf '%q' "${eval_logs[$k]}") 2>&1")
+    done
+    # shellcheck disable=SC2016
+    printf '%s\0' "${jobs[@]}" | xargs -0 -n 1 -P "${N_JOBS:-2}" sh -c \
+      'sh -c "$1" || { echo "[reproduce] failed: $1" >&2; exit 1; }' sh || status=1
+  fi
+  evals=() eval_logs=()
+}
+
 for family in "${families[@]}"; do
   names=()
   for file in conf/experiment/"${family}"_*.yaml; do
     name="$(basename "$file" .yaml)"
     # paper_algorithm.yaml holds the paper's settings that the paper_<setup> files include
-    [[ "$name" == paper_algorithm ]] || names+=("$name")
+    [[ "$name" == paper_algorithm || ! -f "$file" ]] || names+=("$name")
   done
   if (( ${#names[@]} == 0 )); then
     echo "launch/reproduce.sh: no experiment files conf/experiment/${family}_*.yaml" >&2
     exit 2
   fi
+  # reverse order: the 5–20 cm weighted file, the headline, comes before the rows replayed from it
+  mapfile -t names < <(printf '%s\n' "${names[@]}" | sort -r)
+  candidates=("${names[@]}")
+  # the recipe less an improvement on the distance side replays the recipe's own runs
+  [[ "$family" == without ]] && candidates=(recipe_multi_5_20_weighted "${names[@]}")
+  mapfile -t plan < <(python -m parallax.tools.experiments "${candidates[@]}")
   sweep="$(px_sweep_dir "reproduce_$family")"
-  px_sweep "$sweep" "experiment=$(IFS=,; echo "${names[*]}")" "seed=${SEEDS:-0,1,2}" \
-    "${overrides[@]}" || status=$?
-
-  runs=()
-  for name in "${names[@]}"; do
-    [[ "$name" == *multi* ]] && mapfile -t -O "${#runs[@]}" runs < <(px_runs_with "$sweep" "experiment=$name")
+  replays="$(px_sweep_dir "reproduce_${family}_replays")"
+  headline=() others=()
+  for line in "${plan[@]}"; do
+    read -r action name _ <<< "$line"
+    [[ "$action" == train && " ${names[*]} " == *" $name "* ]] || continue
+    if [[ "$family" != without && "$name" == *multi_5_20* ]]; then headline+=("$name"); else others+=("$name"); fi
   done
-  if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
-    runs=("$sweep/<runs of the ${family}_multi_* experiments>")
+  if (( ${#headline[@]} )); then
+    px_sweep "$sweep" "experiment=$(IFS=,; echo "${headline[*]}")" "seed=${HEADLINE_SEEDS:-0,1,2,3,4}" \
+      "${overrides[@]}" || status=$?
   fi
-  for run in "${runs[@]}"; do
-    # finished runs whose evaluation is missing or older than the checkpoint
-    if [[ -n "${PARALLAX_DRY_RUN:-}" || ( -f "$run/summary.json" && ! "$run/eval.json" -nt "$run/checkpoint.pt" ) ]]; then
-      px_run parallax-eval "$run" "${eval_args[@]}" || status=$?
-      px_run parallax-eval "$run" "${eval_args[@]}" --checkpoint checkpoint_before_perturbation.pt \
-        --out "$run/eval_before" || status=$?
-    fi
+  if (( ${#others[@]} )); then
+    px_sweep "$sweep" "experiment=$(IFS=,; echo "${others[*]}")" "seed=${SEEDS:-0,1,2}" \
+      "${overrides[@]}" || status=$?
+  fi
+
+  # every trained multiple-position model, before and after the perturbation (Tables 4–5)
+  for name in "${headline[@]}" "${others[@]}"; do
+    [[ "$name" == *single* ]] && continue
+    runs=()
+    mapfile -t runs < <(px_runs_with "$sweep" "experiment=$name")
+    [[ -n "${PARALLAX_DRY_RUN:-}" ]] && runs=("$sweep/<runs of $name>")
+    for run in "${runs[@]}"; do
+      [[ -n "${PARALLAX_DRY_RUN:-}" || -f "$run/summary.json" ]] || continue
+      queue_eval "$run" checkpoint.pt "$run" "${eval_args[@]}"
+      queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before" "${eval_args[@]}"
+      if [[ "$family" != without && "$name" == *multi_5_20* ]]; then
+        for kind in "${other_kinds[@]}"; do
+          read -ra settings <<< "${kind#*:}"
+          queue_eval "$run" checkpoint.pt "$run/eval_${kind%%:*}" "${other_args[@]}" "${settings[@]}"
+          queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before_${kind%%:*}" \
+            "${other_args[@]}" "${settings[@]}"
+        done
+      fi
+    done
+  done
+  run_evals
+
+  # the experiments that differ only in the distance learner, from their source's runs
+  for line in "${plan[@]}"; do
+    read -r action name source settings <<< "$line"
+    [[ "$action" == replay && " ${names[*]} " == *" $name "* ]] || continue
+    source_sweep="$(px_sweep_dir "reproduce_${source%%_*}")"
+    mapfile -t runs < <(px_runs_with "$source_sweep" "experiment=$source")
+    [[ -n "${PARALLAX_DRY_RUN:-}" ]] && runs=("$source_sweep/<runs of $source>")
+    finished=()
+    for run in "${runs[@]}"; do
+      [[ -n "${PARALLAX_DRY_RUN:-}" || -f "$run/summary.json" ]] && finished+=("$run")
+    done
+    (( ${#finished[@]} )) || continue
+    # shellcheck disable=SC2086  # the overrides are words
+    px_run parallax-replay "${finished[@]}" --out "$replays/$name" $settings || status=$?
   done
 
   if [[ "$family" == recipe ]]; then
@@ -71,14 +168,28 @@ for family in "${families[@]}"; do
     done
   fi
 
-  # the recipe's report is docs/results/README.md, the paper-as-written one paper.md; the
-  # reading of the results, written by hand, is kept across re-runs in notes(_paper).md
-  if [[ "$family" == recipe ]]; then report=README.md notes_file=notes.md; else report="$family.md" notes_file="notes_$family.md"; fi
+  # each family's own report: docs/results/<family>.md; the reading of the results, written by
+  # hand, is kept across re-runs in notes_<family>.md
   notes=()
-  if [[ -f "$report_root/$notes_file" ]]; then
-    notes=(--notes "$report_root/$notes_file")
+  if [[ -f "$report_root/notes_$family.md" ]]; then
+    notes=(--notes "$report_root/notes_$family.md")
   fi
-  px_report "$report_root" "$report" "Tables 2–5 and Figs. 7–11 ($family)" paper "$sweep" \
-    "${notes[@]}" || status=$?
+  sources=("$sweep")
+  [[ -d "$replays" || -n "${PARALLAX_DRY_RUN:-}" ]] && sources+=("$replays")
+  if [[ "$family" == without ]]; then
+    px_run python -m parallax.tools.report.leave_one_out "${sources[@]}" \
+      "$(px_sweep_dir reproduce_recipe)" --out "$report_root" "${notes[@]}" || status=$?
+  else
+    px_report "$report_root" "$family.md" "Tables 2–5 and Figs. 7–11 ($family)" paper \
+      "${sources[@]}" "${notes[@]}" || status=$?
+  fi
 done
+
+# the three columns: the paper's numbers, the paper's algorithm in parallax, ours
+if [[ -f "$report_root/paper.json" && -f "$report_root/recipe.json" ]] || [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
+  notes=()
+  [[ -f "$report_root/notes.md" ]] && notes=(--notes "$report_root/notes.md")
+  px_run python -m parallax.tools.report.compare "$report_root/paper.json" \
+    "$report_root/recipe.json" --out "$report_root" --readme README.md "${notes[@]}" || status=$?
+fi
 exit "$status"

@@ -38,8 +38,48 @@ def test_every_setup_has_both_families_and_nothing_else():
         + [f"recipe_{s}" for s in SETUPS]
         + ["paper_algorithm", "quickstart"]
         + ["embodied_multi_5_20_weighted", "embodied_growth", "planned_multi_5_20_weighted"]
+        + [f"without_{improvement}" for improvement in WITHOUT]
     )
     assert names == expected
+
+
+#: The recipe on 5–20 cm with weighting less each improvement of docs/improvements.md §1–7, and
+#: the settings each one puts back to the paper's.
+WITHOUT = {
+    "step_sizes": {
+        "policy.advantage_lr",
+        "policy.actor_lr",
+        "policy.weight_decay",
+        "policy.actor_projection_radius",
+        "policy.discount",
+    },
+    "state_difference": {"policy.feature_norm"},
+    "start_jitter": {"env.initial_pan_jitter_deg", "train.start_jitter_presentations"},
+    "lm_weight_decay": {"distance.lm.weight_decay"},
+    "eye_position": {"policy.eye_position_reference_m"},
+    "reward_change": {"policy.reward_change_gain"},
+    "best_readout": {"train.distance_readout"},
+}
+
+
+@pytest.mark.parametrize("improvement", sorted(WITHOUT))
+def test_each_leave_one_out_file_puts_back_the_papers_settings_of_one_improvement(improvement):
+    recipe = _flat(["experiment=recipe_multi_5_20_weighted"])
+    without = _flat([f"experiment=without_{improvement}"])
+    differ = {k for k in set(recipe) | set(without) if recipe.get(k) != without.get(k)}
+    assert differ == WITHOUT[improvement]
+    as_written = _flat(["experiment=paper_multi_5_20_weighted"])
+    for key in differ:
+        if key == "policy.feature_norm":
+            # §1's bounded input stays: without §2 the state is θ centred and scaled to unit norm
+            assert without[key] == "centred_unit"
+        elif key == "train.start_jitter_presentations":
+            assert without[key] is None
+        else:
+            assert without[key] == as_written[key], key
+    text = (EXPERIMENTS / f"without_{improvement}.yaml").read_text()
+    sections = {f"§{n}" for n in range(1, 8) if f"docs/improvements.md §{n}:" in text}
+    assert len(sections) == 1
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in EXPERIMENTS.glob("*.yaml")))

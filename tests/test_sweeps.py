@@ -239,7 +239,39 @@ def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path):
         assert "seed=0\\,1\\,2" in line and line.rstrip().endswith("train.presentations=7")
         assert f"hydra.sweep.dir={tmp_path}/" in line
     report = [l for l in lines if l.startswith("parallax-report ")]
-    assert len(report) == 1 and "--out docs/results" in report[0]
+    # reproduce.sh: one report per family with the paper's tables (its own test below)
+    assert len(report) == (2 if script == "reproduce.sh" else 1)
+    assert all("--out docs/results" in line for line in report)
+
+
+def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_files(tmp_path):
+    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
+    result = subprocess.run(
+        ["bash", str(REPO / "launch" / "reproduce.sh")],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    trained = " ".join(l for l in lines if l.startswith("parallax-train -m "))
+    replayed = [l for l in lines if l.startswith("parallax-replay ")]
+    # the rows without weighting, and the recipe less a distance-side improvement, are replays
+    for name in ("recipe_multi_5_20", "paper_multi_5_20", "without_lm_weight_decay"):
+        assert f"experiment={name}\\," not in trained and f"\\,{name}\\," not in trained
+        assert any(f"_replays/{name} " in l for l in replayed), name
+    assert "without_start_jitter" in trained and "recipe_multi_5_20_weighted" in trained
+    # five seeds for the 5–20 cm headline rows, three elsewhere
+    headline = [l for l in lines if l.startswith("parallax-train -m ") and "0\\,1\\,2\\,3\\,4" in l]
+    assert len(headline) == 2 and all("multi_5_20_weighted seed=" in l for l in headline)
+    evals = [l for l in lines if l.startswith("parallax-eval ")]
+    assert evals and all("--robots 16" in l for l in evals)
+    assert any("env.stimuli.source=procedural" in l for l in evals)
+    assert any("env.stimuli.dir=" in l for l in evals)
+    assert lines[-1].startswith("python -m parallax.tools.report.compare ")
+    assert any(l.startswith("python -m parallax.tools.report.leave_one_out ") for l in lines)
 
 
 def test_a_bad_job_fails_alone_in_a_joblib_sweep(tmp_path, tiny_overrides):

@@ -21,11 +21,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 import torch
+import yaml
+from omegaconf import OmegaConf
 
 from parallax import checkpoint
 from parallax.config import (
@@ -39,6 +41,9 @@ from parallax.config import (
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
 from parallax.tools import plots
+
+#: The settings of the held-out textures that parallax-eval may change.
+STIMULI_PREFIX = "env.stimuli."
 
 
 def grid(start: float, stop: float, step: float) -> list[float]:
@@ -55,7 +60,7 @@ def run_jobs(
 ) -> dict[str, np.ndarray]:
     """Run one frozen presentation per (distance, texture) job, B robots at a time (with
     ``route``, Experiment.run_presentation's, one robot on the route it plans)."""
-    pans, targets, dists, starts, routes = [], [], [], [], []
+    pans, other_pans, targets, dists, starts, routes = [], {}, [], [], [], []
     B = exp.robots
     for start in range(0, len(jobs), B):
         batch = jobs[start : start + B]
@@ -65,11 +70,14 @@ def run_jobs(
         pres = exp.run_presentation(learn=False, greedy=greedy, route=route)
         routes.append(pres.route)
         pans.append(getattr(pres, READOUT_PANS[readout])[: len(batch)])
+        for name, attribute in READOUT_PANS.items():
+            other_pans.setdefault(name, []).append(getattr(pres, attribute)[: len(batch)])
         targets.append(pres.targets[: len(batch)])
         dists.append(pres.distances[: len(batch)])
         starts.append(pres.start_pans[: len(batch)])
     return {
         "pans": np.concatenate(pans),
+        "pans_by_readout": {name: np.concatenate(v) for name, v in other_pans.items()},
         "targets": np.concatenate(targets),
         "distances": np.concatenate(dists),
         "start_pans": np.concatenate(starts),
@@ -165,7 +173,20 @@ def evaluate(
     device: str | None = None,
     readout: str | None = None,
     start_jitter: str = "auto",
+    robots: int | None = None,
+    stimuli: Sequence[str] = (),
+    sampled: bool = True,
 ) -> dict:
+    """Frozen measurements of the checkpoint ``checkpoint_name`` of ``run_dir`` (module
+    docstring). ``robots``: how many frozen robots run the trials in lockstep (default: the
+    run's env.robots). Nothing learns, so when trials start from pan 0 the greedy eye's trials,
+    and the distance errors made from them, do not depend on it; the sampled policy's draws, and
+    jittered start pans, come in another order. Robots that the run did not train start their
+    worlds' random streams from the run's seed. ``stimuli``: ``env.stimuli.KEY=VALUE`` settings
+    for the held-out textures (e.g. ``env.stimuli.source=procedural``), whose split stays
+    held-out. ``sampled``: also run every trial with the sampled policy (its MAE only)."""
+    if robots is not None and robots < 1:
+        raise ValueError(f"--robots must be at least 1, got {robots}")
     if start_jitter not in ("auto", "on", "off"):
         raise ValueError(f"--start-jitter must be auto, on or off, got {start_jitter!r}")
     if readout is not None and readout not in DISTANCE_READOUTS:
@@ -192,11 +213,35 @@ def evaluate(
     ckpt_path = run_dir / checkpoint_name
     if not ckpt_path.is_file():
         raise FileNotFoundError(f"{run_dir} has no {checkpoint_name}: nothing to evaluate")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    for item in stimuli:
+        key, sep, value = item.partition("=")
+        if not sep or not key.startswith(STIMULI_PREFIX) or key == f"{STIMULI_PREFIX}split":
+            raise ValueError(
+                f"{item!r}: only {STIMULI_PREFIX}KEY=VALUE settings of the held-out textures may "
+                "be given (not the split)"
+            )
+        if key[len(STIMULI_PREFIX) :] not in cfg.env.stimuli:
+            raise ValueError(f"{item!r}: {key} is not a stimulus setting")
+        OmegaConf.update(cfg, key, yaml.safe_load(value) if value else None)
+    trained_robots = int(cfg.env.robots)
+    robots = trained_robots if robots is None else int(robots)
+    if robots != trained_robots and (
+        cfg.movement.route == "planned" or cfg.distance.targets == "odometry"
+    ):
+        raise ValueError(
+            f"--robots {robots}: a run that plans its route or walks is evaluated with its own "
+            f"env.robots={trained_robots}"
+        )
     state = checkpoint.load(ckpt_path)
+    cfg.env.robots = robots
     exp = Experiment(cfg, stimuli_split="heldout")
+    out_dir.mkdir(parents=True, exist_ok=True)
     try:
-        exp.load_state_dict(state["experiment"])
+        learnt = state["experiment"]
+        if robots != trained_robots:
+            # the checkpoint holds one stream per trained robot; these robots keep their own
+            learnt = {**learnt, "env_random": [env.task.random.get_state() for env in exp.envs]}
+        exp.load_state_dict(learnt)
         exp.set_stage(len(exp.stages) - 1)
         start = perturbation_start(cfg)
         # Perturbed once a presentation ran after the switch (a checkpoint taken at the switch
@@ -237,6 +282,12 @@ def evaluate(
             "perturbed": perturbed,
             "start_jitter": jittered,
             "textures_per_distance": textures,
+            "robots": robots,
+            "stimuli": {
+                **OmegaConf.to_container(cfg.env.stimuli, resolve=True),
+                "split": "heldout",
+            },
+            "stimuli_overrides": list(stimuli),
             "lateral_positions_cm": labels,
             "mae_per_position": {},
             "mae": {},
@@ -245,7 +296,8 @@ def evaluate(
         # the worlds' random streams (textures aside: forced; the jittered start pans) as the
         # checkpoint left them, for the planned routes to start from as the sweeps did
         start_streams = [env.task.random.get_state() for env in exp.envs]
-        for mode, greedy in (("greedy", True), ("sampled", False)):
+        modes = (("greedy", True), ("sampled", False)) if sampled else (("greedy", True),)
+        for mode, greedy in modes:
             runs[mode] = run = run_jobs(exp, jobs, greedy, readout)
             err = np.abs(run["pans"] - run["targets"])
             result["mae_per_position"][mode] = {
@@ -270,6 +322,15 @@ def evaluate(
                 "pans": between_run["pans"].tolist(),
                 "distances": between_run["distances"].tolist(),
             }
+        # and s read out both ways, so that a replay may also change train.distance_readout
+        result["greedy_samples_by_readout"] = {
+            name: {
+                part: {"pans": done["pans_by_readout"][name].tolist()}
+                for part, done in (("grid", runs["greedy"]), ("between", between_run))
+                if done is not None
+            }
+            for name in READOUT_PANS
+        }
         curves = {}
         if exp.planner is not None and exp.planner.is_ready:
             # the planning robot's own routes, greedy, on the grid's presentations
@@ -329,11 +390,11 @@ def format_eval(result: dict) -> str:
             f"readout: {result['readout']} (each trial's pan where the coder's reward was highest)"
         ]
     )
-    lines.append(f"{'position (cm)':>14} {'greedy MAE':>11} {'sampled MAE':>12}")
+    modes = list(result["mae_per_position"])
+    lines.append(f"{'position (cm)':>14}" + "".join(f" {m + ' MAE':>12}" for m in modes))
     for k in result["lateral_positions_cm"]:
         lines.append(
-            f"{k:>14} {result['mae_per_position']['greedy'][k]:>11.3f} "
-            f"{result['mae_per_position']['sampled'][k]:>12.3f}"
+            f"{k:>14}" + "".join(f" {result['mae_per_position'][m][k]:>12.3f}" for m in modes)
         )
     if result.get("start_jitter") and "mae_by_start" in result:
         for mode, m in result["mae_by_start"].items():
@@ -370,6 +431,13 @@ def format_eval(result: dict) -> str:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="parallax-eval", description=__doc__.split("\n\n")[0])
     parser.add_argument("run_dir", help="a run directory written by parallax-train")
+    parser.add_argument(
+        "stimuli",
+        nargs="*",
+        metavar="env.stimuli.KEY=VALUE",
+        help="held-out textures of another kind, e.g. env.stimuli.source=procedural "
+        "env.stimuli.kind=pink_noise, or env.stimuli.dir=FOLDER (default: the run's)",
+    )
     parser.add_argument(
         "--textures", type=int, default=1, help="held-out textures per distance (default 1)"
     )
@@ -419,6 +487,18 @@ def main(argv: list[str] | None = None) -> None:
         "paper): the pan where the coder's reward was highest (default: the "
         "run's train.distance_readout)",
     )
+    parser.add_argument(
+        "--robots",
+        type=int,
+        default=None,
+        help="frozen robots that run the trials in lockstep, for speed; from pan 0, the greedy "
+        "eye and the distance errors do not depend on it (default: the run's env.robots)",
+    )
+    parser.add_argument(
+        "--greedy-only",
+        action="store_true",
+        help="leave out the sampled policy's trials (half the time; no sampled MAE)",
+    )
     args = parser.parse_args(argv)
     try:
         result = evaluate(
@@ -432,6 +512,9 @@ def main(argv: list[str] | None = None) -> None:
             device=args.device,
             readout=args.readout,
             start_jitter=args.start_jitter,
+            robots=args.robots,
+            stimuli=args.stimuli,
+            sampled=not args.greedy_only,
         )
     except (FileNotFoundError, ValueError) as exc:
         print(f"parallax-eval: error: {exc}", file=sys.stderr)

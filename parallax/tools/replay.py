@@ -282,9 +282,9 @@ def _rescore_evals(
     start = (summary.get("before_perturbation") or {}).get("presentations")
     for path in eval_files(run_dir):
         result = json.loads(path.read_text())
-        samples = _eval_samples(result)
-        if not samples or result.get("readout", "last") != readout:
-            continue  # an eval from before the samples were kept, or of s read out otherwise
+        samples = _eval_samples(result, readout)
+        if not samples:
+            continue  # an eval without the samples, or with s read out otherwise only
         at = int(result.get("presentations", -1))
         if result.get("perturbed") or start is None:
             learner = final_learner if at == int(summary["presentations"]) else None
@@ -297,15 +297,29 @@ def _rescore_evals(
         for key, kept in samples.items():
             at_truth = None if truth is None else truth(learner.target_source, kept["distances"])
             result[key] = distance_results(learner, kept["pans"], kept["distances"], at_truth)
+        if result.get("readout", "last") != readout:
+            # the distances are this readout's; the eye-movement errors stay the eval's own
+            result["eye_readout"], result["readout"] = result.get("readout", "last"), readout
         result["replayed_from"] = str(path)
         rescored[str(path.relative_to(run_dir))] = result
     return rescored
 
 
-def _eval_samples(result: dict) -> dict[str, dict]:
-    """eval.json key → the greedy eye's s vectors and distances that eval scored (or would have)."""
+def _eval_samples(result: dict, readout: str) -> dict[str, dict]:
+    """eval.json key → the greedy eye's s vectors, read out as ``readout``, and the distances
+    that eval scored (or would have); empty where the eval kept no such vectors."""
+    names = {"grid": "distance", "between": "distance_between_grid"}
+    by_readout = result.get("greedy_samples_by_readout") or {}
+    if readout in by_readout:
+        kept = result["greedy_samples"]
+        return {
+            names[k]: {"pans": v["pans"], "distances": kept[k]["distances"]}
+            for k, v in by_readout[readout].items()
+            if k in names
+        }
+    if result.get("readout", "last") != readout:
+        return {}
     if "greedy_samples" in result:
-        names = {"grid": "distance", "between": "distance_between_grid"}
         return {names[k]: v for k, v in result["greedy_samples"].items() if k in names}
     return {
         k: result[k]["samples"]

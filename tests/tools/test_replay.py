@@ -201,6 +201,46 @@ def test_replayed_learners_are_scored_on_the_evals_eye_movements(perturbed_run, 
     assert totals["eval.json"] == pytest.approx(after["distance"]["by_range"]["total"], nan_ok=True)
 
 
+def test_an_eval_is_rescored_with_the_other_readout(perturbed_run, tmp_path):
+    """The eval keeps s read out both ways, so a replay that changes the readout scores that
+    readout's pans; as trained, it scores the eval's own."""
+    import numpy as np
+
+    from parallax.tools.evaluate import evaluate
+
+    result = evaluate(perturbed_run, distances=[4.0, 6.0], between=[5.5], out=tmp_path / "ev")
+    by_readout = result["greedy_samples_by_readout"]
+    assert by_readout["last"]["grid"]["pans"] == result["greedy_samples"]["grid"]["pans"]
+    last = np.array(by_readout["last"]["grid"]["pans"])
+    best = np.array(by_readout["best_reward"]["grid"]["pans"])
+    assert last.shape == best.shape == (2, len(result["lateral_positions_cm"]))
+    (perturbed_run / "eval_readout").mkdir(exist_ok=True)
+    (perturbed_run / "eval_readout" / "eval.json").write_text(json.dumps(result))
+    try:
+        rescored = replay(perturbed_run, ["train.distance_readout=best_reward"])["evals"]
+        again = rescored["eval_readout/eval.json"]
+        assert again["readout"] == "best_reward" and again["eye_readout"] == "last"
+        assert again["distance"]["samples"]["pans"] == best.tolist()
+    finally:
+        (perturbed_run / "eval_readout" / "eval.json").unlink()
+        (perturbed_run / "eval_readout").rmdir()
+
+
+def test_frozen_robots_in_lockstep_give_the_same_greedy_eye(perturbed_run, tmp_path):
+    from parallax.tools.evaluate import evaluate
+
+    # from pan 0: a jittered start pan comes from each robot's own stream
+    common = {"distances": [4.0, 6.0, 8.0], "between": [], "start_jitter": "off"}
+    one = evaluate(perturbed_run, out=tmp_path / "one", **common)
+    three = evaluate(perturbed_run, out=tmp_path / "three", robots=3, **common)
+    assert three["robots"] == 3 and one["robots"] == 1
+    assert three["greedy_samples"] == one["greedy_samples"]
+    assert three["mae_per_position"]["greedy"] == one["mae_per_position"]["greedy"]
+    with pytest.raises(ValueError, match="--robots must be at least 1, got 0"):
+        evaluate(perturbed_run, distances=[4.0], out=tmp_path / "none", robots=0)
+    assert not (tmp_path / "none").exists()
+
+
 def test_the_cli_prints_each_runs_totals_and_their_spread(perturbed_run, tmp_path, capsys):
     from parallax.tools.evaluate import evaluate
 
@@ -222,12 +262,20 @@ def test_evals_without_a_ready_learner_still_give_their_eye_movements():
     from parallax.tools.replay import _eval_samples
 
     kept = {"pans": [[0.1, 0.2]], "distances": [4.0]}
-    assert _eval_samples({"greedy_samples": {"grid": kept, "between": kept}}) == {
+    assert _eval_samples({"greedy_samples": {"grid": kept, "between": kept}}, "last") == {
         "distance": kept,
         "distance_between_grid": kept,
     }
-    assert _eval_samples({"distance": {"by_range": {}, "samples": kept}}) == {"distance": kept}
-    assert _eval_samples({"mae": {}}) == {}
+    assert _eval_samples({"distance": {"by_range": {}, "samples": kept}}, "last") == {
+        "distance": kept
+    }
+    assert _eval_samples({"mae": {}}, "last") == {}
+    # an eval of best-encoded pans without the other readout cannot give the last pans ...
+    best = {"readout": "best_reward", "greedy_samples": {"grid": kept}}
+    assert _eval_samples(best, "last") == {}
+    # ... one that kept both readouts can
+    best["greedy_samples_by_readout"] = {"last": {"grid": {"pans": [[0.3, 0.4]]}}}
+    assert _eval_samples(best, "last") == {"distance": {"pans": [[0.3, 0.4]], "distances": [4.0]}}
 
 
 def test_replayed_checkpoints_hold_the_replayed_learner(perturbed_run, tmp_path):

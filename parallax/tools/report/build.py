@@ -65,8 +65,11 @@ def _run_record(run: Run) -> dict:
                 "file": relpath(e["_path"]),
                 "presentations": e.get("presentations"),
                 "perturbed": e.get("perturbed"),
+                "stimuli_overrides": e.get("stimuli_overrides") or [],
                 "distance_by_range": (e.get("distance") or {}).get("by_range"),
+                "trials": (e.get("distance") or {}).get("trials"),
                 "between_grid_by_range": (e.get("distance_between_grid") or {}).get("by_range"),
+                "between_trials": (e.get("distance_between_grid") or {}).get("trials"),
                 "mae": e.get("mae"),
             }
             for e in run.evals

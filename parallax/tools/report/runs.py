@@ -102,20 +102,32 @@ class Run:
             return self.summary.get("last_trials") if self.perturbation_start is None else None
         return self.summary.get("last_trials") if before is not None else None
 
+    @property
+    def photograph_evals(self) -> list[dict]:
+        """The evaluations on the run's own kind of held-out textures (the photographs, unless
+        the run trained on others), not those given textures of another kind."""
+        return [e for e in self.evals if not e.get("stimuli_overrides")]
+
+    def evals_on(self, stimuli: list[str]) -> list[dict]:
+        """The evaluations on textures set by these ``env.stimuli.*`` overrides of parallax-eval."""
+        return [e for e in self.evals if list(e.get("stimuli_overrides") or []) == list(stimuli)]
+
     # Tables 4–5: the evaluation that measures the model in this phase, if one was made.
-    def eval_for(self, phase: str) -> dict | None:
+    def eval_for(self, phase: str, stimuli: list[str] | None = None) -> dict | None:
+        """``stimuli``: the evaluations on textures of another kind (parallax-eval's overrides)."""
+        evals = self.photograph_evals if stimuli is None else self.evals_on(stimuli)
         start = self.perturbation_start
         if phase == "before":
             fits = [
                 e
-                for e in self.evals
+                for e in evals
                 if not e.get("perturbed")
                 and (start is None or int(e.get("presentations", 0)) <= start)
             ]
         elif start is None:
             return None  # never trained under the perturbation: no "after" model
         else:
-            fits = [e for e in self.evals if e.get("perturbed")]
+            fits = [e for e in evals if e.get("perturbed")]
         return max(fits, key=lambda e: int(e.get("presentations", 0)), default=None)
 
     def final_eval(self) -> dict | None:
@@ -125,7 +137,7 @@ class Run:
         ended_perturbed = self.summary.get("before_perturbation") is not None
         fits = [
             e
-            for e in self.evals
+            for e in self.photograph_evals
             if bool(e.get("perturbed")) == ended_perturbed
             and int(e.get("presentations", -1)) == int(self.summary.get("presentations", -2))
         ]

@@ -1,0 +1,341 @@
+"""The paper's Tables 2–5 in three columns: the published number, the paper's algorithm as
+written run in parallax (``experiment=paper_<setup>``), and ours (``experiment=recipe_<setup>``);
+and, for every 5–20 cm model, the evaluations a sceptic would ask for.
+
+    python -m parallax.tools.report.compare docs/results/paper.json docs/results/recipe.json
+        --out docs/results
+
+It reads the JSON that `parallax-report --tables paper` wrote for each family (launch/
+reproduce.sh makes both), so the three columns come from the same numbers as the two families'
+own reports. Writes README.md (or --name) and its JSON (compare.json) into --out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from parallax.tools.report import paper_results as paper
+from parallax.tools.report.groups import Stat, json_ready
+from parallax.tools.report.runs import ReportError, total_error
+from parallax.tools.report.tables import md_table
+
+#: The columns beside the paper's, and what each family's experiment files are.
+FAMILIES = ("paper as written", "ours")
+TEXTURES_PHOTOGRAPHS = "held-out photographs"
+
+
+def _stat(d: dict | None) -> Stat:
+    if not d:
+        return Stat(float("nan"), float("nan"), 0)
+    return Stat(*(float("nan") if d.get(k) is None else d[k] for k in ("mean", "sd")), d["n"])
+
+
+def _text(stat: Stat, digits: int = 2) -> str:
+    return "—" if stat.n == 0 else f"{stat.text(digits)} (n={stat.n})"
+
+
+def _load(path: str | Path) -> dict:
+    path = Path(path)
+    try:
+        result = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ReportError(f"{path}: {exc}") from None
+    if not result.get("paper"):
+        raise ReportError(f"{path}: no paper tables (made with parallax-report --tables paper?)")
+    return result
+
+
+_NOT_RUN: dict = {
+    "paper": {k: {"cells": {}, "rows": {}} for k in ("table2", "table3", "table4", "table5")},
+    "groups": [],
+}
+
+
+def eye_table(families: dict[str, dict], key: str) -> tuple[str, dict, list[str]]:
+    """Table 2 (key 'table2') or 3 ('table3'): per lateral position and column, three cells."""
+    header = ["L (cm)"]
+    for column in paper.EYE_MOVEMENT_COLUMNS:
+        header += [f"{column}: paper", *(f"{column}: {f}" for f in families)]
+    rows, data, worse = [], {}, []
+    for position in paper.TABLE_POSITIONS_CM:
+        row = [position]
+        for column in paper.EYE_MOVEMENT_COLUMNS:
+            published = (paper.TABLE2 if key == "table2" else paper.TABLE3)[column][position]
+            row.append("-" if published is None else f"{published[0]:.2f}")
+            cell = {"paper": None if published is None else published[0]}
+            for family, result in families.items():
+                found = result["paper"][key]["cells"].get(column, {}).get(position) or {}
+                stat = _stat((found.get("ours") or {}).get("mean"))
+                row.append("-" if published is None else _text(stat))
+                cell[family] = stat.as_dict()
+                if published is not None and stat.n and round(stat.mean, 2) > published[0]:
+                    worse.append(
+                        f"{family}, {column} at {position} cm: {stat.mean:.2f}° against "
+                        f"{published[0]:.2f}° (+{stat.mean - published[0]:.2f}°)"
+                    )
+            data.setdefault(column, {})[position] = cell
+        rows.append(row)
+    return md_table(header, rows), data, worse
+
+
+def distance_table(families: dict[str, dict], key: str) -> tuple[str, dict, list[str]]:
+    """Table 4 (key 'table4') or 5 ('table5'): per row and range of distances, three cells."""
+    published_table = paper.TABLE4 if key == "table4" else paper.TABLE5
+    header = ["Simulation"]
+    for r in paper.DISTANCE_RANGES:
+        title = paper.DISTANCE_RANGE_TITLES[r]
+        header += [f"{title}: paper", *(f"{title}: {f}" for f in families)]
+    rows, data, worse = [], {}, []
+    for row_name, published in published_table.items():
+        row = [row_name]
+        data[row_name] = {}
+        for r in paper.DISTANCE_RANGES:
+            row.append(f"{published[r]:.2f}")
+            cell = {"paper": published[r]}
+            for family, result in families.items():
+                found = result["paper"][key]["rows"].get(row_name) or {}
+                stat = _stat((found.get("ours") or {}).get(r))
+                row.append(_text(stat))
+                cell[family] = stat.as_dict()
+                if stat.n and round(stat.mean, 2) > published[r]:
+                    worse.append(
+                        f"{family}, {row_name}, {paper.DISTANCE_RANGE_TITLES[r]}: "
+                        f"{stat.mean:.2f} % against {published[r]:.2f} % "
+                        f"({stat.mean / published[r]:.1f}×)"
+                    )
+            data[row_name][r] = cell
+        rows.append(row)
+    return md_table(header, rows), data, worse
+
+
+def _kind(overrides: Sequence[str]) -> str:
+    if not overrides:
+        return TEXTURES_PHOTOGRAPHS
+    settings = dict(o.split("=", 1) for o in overrides)
+    if "dir" in {k.rsplit(".", 1)[-1] for k in settings}:
+        folder = next(v for k, v in settings.items() if k.endswith(".dir"))
+        return f"photographs of other subjects ({Path(folder).name}/)"
+    return settings.get("env.stimuli.kind", settings.get("env.stimuli.source", " ".join(overrides)))
+
+
+def sceptic_table(families: dict[str, dict]) -> tuple[str, list[dict]]:
+    """Every 5–20 cm model (Tables 4–5's rows) of each family, before and after the
+    perturbation: held-out photographs on the grid and between its points, and textures of
+    other kinds; mean ± sd over seeds and the trials behind each number (per seed)."""
+    rows, data = [], []
+    for family, result in families.items():
+        groups = {g["id"]: g for g in result.get("groups", [])}
+        for row_name in (paper.NO_WEIGHTING_5_20, paper.WEIGHTING_5_20):
+            found = result["paper"]["table5"]["rows"].get(row_name) or {}
+            group = groups.get(found.get("group"))
+            if group is None:
+                continue
+            for perturbed, phase in ((False, "before"), (True, "after")):
+                measured: dict[str, dict[str, list]] = {}
+                for run in group["runs"]:
+                    for e in run.get("evals", []):
+                        if bool(e.get("perturbed")) != perturbed:
+                            continue
+                        kind = _kind(e.get("stimuli_overrides") or [])
+                        parts = [("grid", "distance_by_range", "trials")]
+                        if e.get("between_trials"):
+                            parts.append(("between", "between_grid_by_range", "between_trials"))
+                        for part, by_range, trials in parts:
+                            slot = measured.setdefault(f"{kind}, {part}", {"v": [], "t": []})
+                            slot["v"].append(total_error(e.get(by_range)))
+                            slot["t"].append(e.get(trials))
+                for what, slot in sorted(measured.items()):
+                    stat = Stat.of(slot["v"])
+                    trials = sorted({t for t in slot["t"] if t is not None})
+                    rows.append(
+                        [
+                            family,
+                            row_name,
+                            phase,
+                            what,
+                            _text(stat),
+                            "/".join(map(str, trials)) or "—",
+                        ]
+                    )
+                    data.append(
+                        {
+                            "family": family,
+                            "model": row_name,
+                            "phase": phase,
+                            "textures": what,
+                            "total": stat.as_dict(),
+                            "trials_per_seed": trials,
+                        }
+                    )
+    header = ["family", "model", "perturbation", "textures", "distance error (%)", "trials"]
+    return md_table(header, rows), data
+
+
+#: The README's results table sits between these two lines; `--readme` rewrites it.
+README_BEGIN = "<!-- results table: python -m parallax.tools.report.compare --readme README.md -->"
+README_END = "<!-- end of the results table -->"
+
+
+def _eye_range(cells: dict, column: str, family: str) -> str:
+    means = [
+        c[family]["mean"]
+        for c in cells[column].values()
+        if c["paper"] is not None and c.get(family) and c[family]["n"]
+    ]
+    return "not yet run" if not means else f"{min(means):.2f}–{max(means):.2f}°"
+
+
+def _published_range(table: dict, column: str) -> str:
+    values = [v[0] for v in table[column].values() if v is not None]
+    return f"{min(values):.2f}–{max(values):.2f}°"
+
+
+def readme_table(data: dict) -> str:
+    """The README's summary: Tables 2–3 as ranges over the lateral positions, Tables 4–5's
+    totals; the paper, the paper's algorithm as written, ours."""
+    header = ["", "paper (published)", "paper's algorithm, run in parallax", "ours (recipe)"]
+    rows = []
+    for key, table, what in (
+        ("table2", paper.TABLE2, "Table 2: eye error"),
+        ("table3", paper.TABLE3, "Table 3: eye error after the perturbation"),
+    ):
+        for column, name in zip(
+            paper.EYE_MOVEMENT_COLUMNS,
+            (
+                "single positions 5…20 cm",
+                "multiple positions 5–10 cm",
+                "multiple positions 5–20 cm",
+            ),
+            strict=True,
+        ):
+            rows.append(
+                [f"{what}, {name}", _published_range(table, column)]
+                + [_eye_range(data[key], column, f) for f in FAMILIES]
+            )
+    for key, what in (("table4", "Table 4: distance error"), ("table5", "Table 5: after it")):
+        for row_name, cells in data[key].items():
+            total = cells["total"]
+            rows.append(
+                [f"{what}, {row_name}", f"{total['paper']:.2f} %"]
+                + [
+                    "not yet run"
+                    if not total[f]["n"]
+                    else f"{_stat(total[f]).text()} % (n={total[f]['n']})"
+                    for f in FAMILIES
+                ]
+            )
+    return md_table(header, rows)
+
+
+def write_readme_table(readme: Path, table: str) -> None:
+    text = readme.read_text()
+    if README_BEGIN not in text or README_END not in text:
+        raise ReportError(f"{readme}: no lines {README_BEGIN!r} … {README_END!r} to write between")
+    head, rest = text.split(README_BEGIN, 1)
+    _, tail = rest.split(README_END, 1)
+    readme.write_text(f"{head}{README_BEGIN}\n\n{table}\n\n{README_END}{tail}")
+
+
+def readme_block(readme: Path) -> str:
+    """The table now between the README's marker lines."""
+    text = readme.read_text()
+    return text.split(README_BEGIN, 1)[1].split(README_END, 1)[0].strip()
+
+
+def compare(paper_json: str | Path | None, ours_json: str | Path) -> tuple[str, dict]:
+    # the paper's algorithm as written, not run yet: an empty column
+    as_written = _load(paper_json) if paper_json is not None else _NOT_RUN
+    families = dict(zip(FAMILIES, (as_written, _load(ours_json)), strict=True))
+    md = [
+        "# The paper, the paper's algorithm as written, and ours: Tables 2–5",
+        "",
+        "Made by `python -m parallax.tools.report.compare` from "
+        f"`{paper_json}` (the paper's algorithm as written, `experiment=paper_<setup>`) and "
+        f"`{ours_json}` (our recipe, `experiment=recipe_<setup>`), which `parallax-report` "
+        "wrote from the runs of `bash launch/reproduce.sh`. Cells: mean ± sd over seeds (n "
+        "seeds); the paper's published number beside them.",
+        "",
+    ]
+    data: dict = {"inputs": [str(paper_json), str(ours_json)]}
+    worse_all: list[str] = []
+    for key, number, what in (
+        ("table2", 2, "eye-movement error of the last 100 trials (deg), before the perturbation"),
+        ("table3", 3, "the same after the perturbation (camera rotated 15°, blur σ = 2)"),
+    ):
+        text, cells, worse = eye_table(families, key)
+        md += [f"**Table {number}** — {what}.", "", text, ""]
+        data[key], worse_all = cells, worse_all + worse
+    for key, number, what in (
+        ("table4", 4, "distance-estimation error (%), held-out photographs, before"),
+        ("table5", 5, "the same after the perturbation"),
+    ):
+        text, cells, worse = distance_table(families, key)
+        md += [f"**Table {number}** — {what}.", "", text, ""]
+        data[key], worse_all = cells, worse_all + worse
+    md += ["## Cells worse than the paper", ""]
+    md += [f"- {w}" for w in worse_all] or ["None."]
+    md += [""]
+    data["worse_than_paper"] = worse_all
+    text, sceptic = sceptic_table(families)
+    md += [
+        "## Every 5–20 cm model on held-out textures",
+        "",
+        "Frozen models (`parallax-eval`): held-out photographs on the grid and between its "
+        "points, and textures of other kinds; the total distance error, mean ± sd over seeds, "
+        "and the trials per seed behind it.",
+        "",
+        text,
+        "",
+    ]
+    data["sceptic"] = sceptic
+    return "\n".join(md), data
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.tools.report.compare", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument(
+        "paper_json", help="parallax-report's JSON of the paper family ('-': not run yet)"
+    )
+    parser.add_argument("ours_json", help="parallax-report's JSON of the recipe family")
+    parser.add_argument("--out", default=None, help="folder for the Markdown and compare.json")
+    parser.add_argument("--name", default="README.md", help="file name of the Markdown")
+    parser.add_argument("--notes", default=None, help="a Markdown file put under the title")
+    parser.add_argument(
+        "--readme",
+        default=None,
+        help="also rewrite the summary table of this README (between its marker lines)",
+    )
+    args = parser.parse_args(argv)
+    try:
+        text, data = compare(None if args.paper_json == "-" else args.paper_json, args.ours_json)
+        if args.readme is not None:
+            readme = Path(args.readme)
+            if README_BEGIN not in readme.read_text():
+                raise ReportError(f"{readme}: no line {README_BEGIN!r} to write after")
+        if args.notes:
+            head, _, rest = text.partition("\n\n")
+            text = "\n\n".join([head, Path(args.notes).read_text().strip(), rest])
+    except (ReportError, OSError) as exc:
+        print(f"compare: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    if args.out is None:
+        print(text, end="")
+    else:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / args.name).write_text(text.rstrip() + "\n")
+        (out / "compare.json").write_text(json.dumps(json_ready(data), indent=1) + "\n")
+        print(f"[compare] wrote {out / args.name}")
+    if args.readme is not None:
+        write_readme_table(Path(args.readme), readme_table(data))
+        print(f"[compare] wrote the results table of {args.readme}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,113 @@
+"""The three-column tables: the paper's number, the paper's algorithm as written, ours."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from parallax.tools.report import paper_results as paper
+from parallax.tools.report.compare import compare, main
+
+
+def _stat(mean, n=3):
+    return {"mean": mean, "sd": 0.01, "n": n}
+
+
+def _family(eye, distance, evals):
+    """A parallax-report JSON with every Table 2–3 cell at ``eye`` and every Table 4–5 cell at
+    ``distance``; the 5–20 cm weighted group holds ``evals``."""
+    cells = {
+        column: {
+            p: {"ours": {"mean": _stat(eye)}} if paper.TABLE2[column][p] else {"ours": None}
+            for p in paper.TABLE_POSITIONS_CM
+        }
+        for column in paper.EYE_MOVEMENT_COLUMNS
+    }
+    rows = {
+        row: {"ours": {r: _stat(distance) for r in paper.DISTANCE_RANGES}, "group": f"g_{i}"}
+        for i, row in enumerate(paper.TABLE4)
+    }
+    weighted = f"g_{list(paper.TABLE4).index(paper.WEIGHTING_5_20)}"
+    return {
+        "paper": {
+            "table2": {"cells": cells},
+            "table3": {"cells": cells},
+            "table4": {"rows": rows},
+            "table5": {"rows": rows},
+        },
+        "groups": [{"id": weighted, "runs": [{"evals": evals}]}],
+    }
+
+
+def test_three_columns_and_the_cells_worse_than_the_paper(tmp_path):
+    evals = [
+        {
+            "perturbed": True,
+            "stimuli_overrides": [],
+            "distance_by_range": {"total": 1.1},
+            "trials": 71,
+            "between_grid_by_range": {"total": 1.3},
+            "between_trials": 35,
+        },
+        {
+            "perturbed": True,
+            "stimuli_overrides": ["env.stimuli.source=procedural", "env.stimuli.kind=dead_leaves"],
+            "distance_by_range": {"total": 2.5},
+            "trials": 36,
+        },
+    ]
+    (tmp_path / "paper.json").write_text(json.dumps(_family(0.5, 9.0, [])))
+    (tmp_path / "recipe.json").write_text(json.dumps(_family(0.1, 0.5, evals)))
+    text, data = compare(tmp_path / "paper.json", tmp_path / "recipe.json")
+    cell = data["table2"][paper.SINGLE]["5"]
+    assert cell["paper"] == 0.18
+    assert cell["paper as written"]["mean"] == 0.5 and cell["ours"]["mean"] == 0.1
+    assert "| 5 | 0.18 | 0.50 ± 0.01 (n=3) | 0.10 ± 0.01 (n=3) |" in text
+    # the paper as written is worse in every cell, ours in none
+    worse = data["worse_than_paper"]
+    assert worse and all(w.startswith("paper as written") for w in worse)
+    assert f"paper as written, {paper.WEIGHTING_5_20}, Total average: 9.00 % against 2.69 %" in (
+        "\n".join(worse)
+    )
+    sceptic = {(r["textures"], r["phase"]): r for r in data["sceptic"]}
+    assert sceptic[("held-out photographs, grid", "after")]["trials_per_seed"] == [71]
+    assert sceptic[("held-out photographs, between", "after")]["total"]["mean"] == 1.3
+    assert sceptic[("dead_leaves, grid", "after")]["total"]["mean"] == 2.5
+
+
+def test_a_report_without_the_paper_tables_is_one_line_and_exit_2(tmp_path, capsys):
+    (tmp_path / "a.json").write_text(json.dumps({"paper": None}))
+    with pytest.raises(SystemExit) as exit_info:
+        main([str(tmp_path / "a.json"), str(tmp_path / "a.json"), "--out", str(tmp_path / "o")])
+    assert exit_info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "a.json" in line and "paper tables" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_readme_table_is_made_from_the_committed_report():
+    from pathlib import Path
+
+    from parallax.tools.report.compare import readme_block, readme_table
+
+    root = Path(__file__).resolve().parents[2]
+    results = root / "docs" / "results"
+    as_written = results / "paper.json"
+    _text, data = compare(as_written if as_written.is_file() else None, results / "results.json")
+    assert readme_block(root / "README.md") == readme_table(data)
+
+
+def test_the_readme_table_says_what_is_not_run_yet(tmp_path):
+    from parallax.tools.report.compare import README_BEGIN, README_END
+
+    (tmp_path / "recipe.json").write_text(json.dumps(_family(0.1, 0.5, [])))
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# x\n\n{README_BEGIN}\nold\n{README_END}\n\nmore\n")
+    main(["-", str(tmp_path / "recipe.json"), "--readme", str(readme)])
+    text = readme.read_text()
+    assert "old" not in text and text.endswith(f"{README_END}\n\nmore\n")
+    assert (
+        "| Table 5: after it, 5-20 cm with weighting | 1.30 % | not yet run | 0.50 ± 0.01 % (n=3) |"
+        in text
+    )

@@ -1,0 +1,60 @@
+"""parallax-eval on textures of another kind than the training photographs."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from parallax.tools.evaluate import evaluate, main
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    from tests.conftest import train_tiny_run
+
+    return train_tiny_run(tmp_path_factory.mktemp("run"), ["train.presentations=4"])
+
+
+def test_held_out_textures_of_another_kind(tiny_run, tmp_path):
+    common = {"distances": [4.0, 6.0], "between": [], "start_jitter": "off"}
+    photos = evaluate(tiny_run, out=tmp_path / "photos", **common)
+    assert photos["stimuli"]["source"] == "skimage" and photos["stimuli"]["split"] == "heldout"
+    noise = evaluate(
+        tiny_run,
+        out=tmp_path / "noise",
+        stimuli=["env.stimuli.source=procedural", "env.stimuli.kind=pink_noise"],
+        sampled=False,
+        **common,
+    )
+    assert list(noise["mae"]) == ["greedy"] and list(photos["mae"]) == ["greedy", "sampled"]
+    assert noise["stimuli"]["source"] == "procedural" and noise["stimuli"]["kind"] == "pink_noise"
+    assert noise["greedy_samples"]["grid"]["pans"] != photos["greedy_samples"]["grid"]["pans"]
+    folder = tmp_path / "images"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(2):
+        cv2.imwrite(str(folder / f"{k}.png"), rng.integers(0, 255, (40, 60, 3), dtype=np.uint8))
+    # the run's count of textures is more than the folder holds: every image of it instead
+    mine_settings = [f"env.stimuli.dir={folder}", "env.stimuli.count=null"]
+    mine = evaluate(tiny_run, out=tmp_path / "mine", stimuli=mine_settings, **common)
+    assert mine["stimuli"]["dir"] == str(folder)
+    assert len(mine["greedy_samples"]["grid"]["pans"]) == 2
+
+
+@pytest.mark.parametrize(
+    "item, named",
+    [
+        ("env.stimuli.split=train", "env.stimuli.split=train"),
+        ("env.stimuli.colour=red", "env.stimuli.colour"),
+        ("policy.actor_lr=1", "policy.actor_lr=1"),
+        ("env.stimuli.kind=plaid", "stimuli.kind='plaid'"),
+    ],
+)
+def test_a_bad_stimulus_setting_is_one_line_and_exit_2(tiny_run, tmp_path, capsys, item, named):
+    with pytest.raises(SystemExit) as exit_info:
+        main([str(tiny_run), item, "--out", str(tmp_path / "out"), "--distances", "4.0"])
+    assert exit_info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert named in line
+    assert not (tmp_path / "out").exists()
