@@ -17,8 +17,10 @@
 # continue from their checkpoints; a model is evaluated again only when its checkpoint is newer
 # than its eval. Extra settings: launch/ablation_lib.sh (LAUNCHER, N_JOBS, SWEEP_ROOT,
 # REPORT_ROOT, PARALLAX_DRY_RUN), plus
-#   EVAL_ARGS   parallax-eval options of every model (default: held-out photographs, one per
-#               distance of the grid 3.0, 3.1, …, 10.0 m, and 35 distances between its points)
+#   EVAL_ARGS   parallax-eval options of every model (default: the greedy eye on held-out
+#               photographs, one per distance of the grid 3.0, 3.1, …, 10.0 m, and 35 distances
+#               between its points)
+#   WITHOUT_ARGS  the same for the without family (default: the grid only)
 #   OTHER_ARGS  parallax-eval options for textures of another kind (default: the grid 3.0, 3.2,
 #               …, 10.0 m, greedy only), on the recipe's and the paper's 5–20 cm models
 set -euo pipefail
@@ -31,7 +33,9 @@ done
 if (( ${#families[@]} == 0 )); then
   families=(recipe paper without)
 fi
-read -ra eval_args <<< "${EVAL_ARGS:---robots 16 --between $(LC_ALL=C seq -s ' ' -f '%.2f' 3.05 0.2 9.85)}"
+read -ra eval_args <<< "${EVAL_ARGS:---robots 16 --greedy-only --between $(LC_ALL=C seq -s ' ' -f '%.2f' 3.05 0.2 9.85)}"
+# the recipe less an improvement: the grid alone
+read -ra without_args <<< "${WITHOUT_ARGS:---robots 16 --greedy-only --between}"
 read -ra other_args <<< "${OTHER_ARGS:---robots 16 --greedy-only --between --distances $(LC_ALL=C seq -s ' ' -f '%.1f' 3.0 0.2 10.0)}"
 # textures of another kind than the photographs: generated ones, and a folder of photographs of
 # other subjects that neither split uses (matplotlib's and scikit-image's sample images)
@@ -44,8 +48,7 @@ from pathlib import Path
 import matplotlib, skimage
 mpl, ski = Path(matplotlib.get_data_path()) / "sample_data", Path(skimage.__file__).parent / "data"
 for path in (mpl / "grace_hopper.jpg", mpl / "Minduka_Present_Blue_Pack.png",
-             ski / "clock_motion.png", ski / "hubble_deep_field.jpg", ski / "microaneurysms.png",
-             ski / "chessboard_RGB.png"):
+             ski / "clock_motion.png", ski / "hubble_deep_field.jpg", ski / "microaneurysms.png"):
     shutil.copy(path, sys.argv[1])
 EOF
 fi
@@ -124,8 +127,9 @@ for family in "${families[@]}"; do
     [[ -n "${PARALLAX_DRY_RUN:-}" ]] && runs=("$sweep/<runs of $name>")
     for run in "${runs[@]}"; do
       [[ -n "${PARALLAX_DRY_RUN:-}" || -f "$run/summary.json" ]] || continue
-      queue_eval "$run" checkpoint.pt "$run" "${eval_args[@]}"
-      queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before" "${eval_args[@]}"
+      if [[ "$family" == without ]]; then args=("${without_args[@]}"); else args=("${eval_args[@]}"); fi
+      queue_eval "$run" checkpoint.pt "$run" "${args[@]}"
+      queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before" "${args[@]}"
       if [[ "$family" != without && "$name" == *multi_5_20* ]]; then
         for kind in "${other_kinds[@]}"; do
           read -ra settings <<< "${kind#*:}"

@@ -12,7 +12,7 @@ over seeds:
 - eye: Table 2's (Table 3's) statistic, the mean error of the last 100 trials before (after)
   the perturbation, averaged over the 16 lateral positions;
 - distance: the frozen model's error on held-out photographs (parallax-eval), Table 4's total
-  before the perturbation and Table 5's after it, and between the grid points after it.
+  before the perturbation and Table 5's after it.
 
 Writes leave_one_out.md and leave_one_out.json into --out.
 """
@@ -56,10 +56,12 @@ def _eye(phase: str) -> Callable[[Run], float | None]:
     return value
 
 
-def _distance(phase: str, part: str = "distance") -> Callable[[Run], float | None]:
+def _distance(phase: str) -> Callable[[Run], float | None]:
     def value(run: Run) -> float | None:
         result = run.eval_for(phase)
-        return None if result is None else total_error((result.get(part) or {}).get("by_range"))
+        return (
+            None if result is None else total_error((result.get("distance") or {}).get("by_range"))
+        )
 
     return value
 
@@ -70,11 +72,6 @@ METRICS: tuple[tuple[str, str, Callable[[Run], float | None]], ...] = (
     ("eye_after", "eye, Table 3 (deg)", _eye("after")),
     ("distance_before", "distance, Table 4 (%)", _distance("before")),
     ("distance_after", "distance, Table 5 (%)", _distance("after")),
-    (
-        "between_after",
-        "between grid points, after (%)",
-        _distance("after", "distance_between_grid"),
-    ),
 )
 
 
