@@ -217,23 +217,29 @@ def test_submitit_local_sweep_survives_a_requeue(tmp_path, tiny_overrides):
 # --- launch scripts ----------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("script", LAUNCH_SCRIPTS)
-def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path):
-    path = REPO / "launch" / script
-    subprocess.run(["bash", "-n", str(path)], check=True)
-    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
+def _dry_run(script: str, tmp_path: Path, *args: str, **settings: str) -> list[str]:
+    """The commands a launch script prints with PARALLAX_DRY_RUN=1, sweeping below tmp_path
+    (``args``: its arguments; ``settings``: more of its environment variables)."""
+    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path), **settings}
     result = subprocess.run(
-        ["bash", str(path), "train.presentations=7"],
+        ["bash", str(REPO / "launch" / script), *args],
         cwd=tmp_path,
         env=env,
         capture_output=True,
         text=True,
-        timeout=60,
+        timeout=120,
     )
     assert result.returncode == 0, result.stderr
-    lines = result.stdout.splitlines()
+    return result.stdout.splitlines()
+
+
+@pytest.mark.parametrize("script", LAUNCH_SCRIPTS)
+def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path):
+    path = REPO / "launch" / script
+    subprocess.run(["bash", "-n", str(path)], check=True)
+    lines = _dry_run(script, tmp_path, "train.presentations=7")
     sweeps = [l for l in lines if l.startswith("parallax-train -m ")]
-    assert sweeps, result.stdout
+    assert sweeps, lines
     for line in sweeps:
         assert "hydra/launcher=joblib" in line and "hydra.launcher.n_jobs=2" in line
         assert "seed=0\\,1\\,2" in line and line.rstrip().endswith("train.presentations=7")
@@ -245,17 +251,7 @@ def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path):
 
 
 def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_files(tmp_path):
-    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
-    result = subprocess.run(
-        ["bash", str(REPO / "launch" / "reproduce.sh")],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert result.returncode == 0, result.stderr
-    lines = result.stdout.splitlines()
+    lines = _dry_run("reproduce.sh", tmp_path)
     trained = " ".join(l for l in lines if l.startswith("parallax-train -m "))
     replayed = [l for l in lines if l.startswith("parallax-replay ")]
     # the rows without weighting, and the recipe less a distance-side improvement, are replays
@@ -301,32 +297,16 @@ def test_a_bad_job_fails_alone_in_a_joblib_sweep(tmp_path, tiny_overrides):
 @pytest.mark.parametrize("script", ["ablation_y.sh", "ablation_queue.sh"])
 def test_distance_ablations_replay_their_source_runs(script, tmp_path):
     """y and c only change the distance learner: the scripts replay logged eye movements."""
-    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
-    trained = subprocess.run(
-        ["bash", str(REPO / "launch" / script)],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    replays = [l for l in trained.stdout.splitlines() if l.startswith("parallax-replay ")]
+    trained = _dry_run(script, tmp_path)
+    replays = [l for l in trained if l.startswith("parallax-replay ")]
     assert replays and all(f"{tmp_path}/ablation_distance_source --out" in l for l in replays), (
-        trained.stdout
+        trained
     )
     assert all("--until-perturbation" in l for l in replays)
     (tmp_path / "runs" / "a").mkdir(parents=True)
     (tmp_path / "runs" / "b").mkdir()
-    given = subprocess.run(
-        ["bash", str(REPO / "launch" / script)],
-        cwd=tmp_path,
-        env={**env, "SOURCE": f"{tmp_path}/runs/*"},
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    lines = given.stdout.splitlines()
-    assert not [l for l in lines if l.startswith("parallax-train")], given.stdout
+    lines = _dry_run(script, tmp_path, SOURCE=f"{tmp_path}/runs/*")
+    assert not [l for l in lines if l.startswith("parallax-train")], lines
     assert all(
         f"{tmp_path}/runs/a {tmp_path}/runs/b --out" in l
         for l in lines
@@ -335,17 +315,7 @@ def test_distance_ablations_replay_their_source_runs(script, tmp_path):
 
 
 def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_path):
-    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path)}
-    result = subprocess.run(
-        ["bash", str(REPO / "launch" / "ablations.sh")],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert result.returncode == 0, result.stderr
-    lines = result.stdout.splitlines()
+    lines = _dry_run("ablations.sh", tmp_path)
     trained = [l for l in lines if l.startswith("parallax-train -m ")]
     assert len(trained) == 1 and "coder=coarse\\,fine\\,two_scale" in trained[0]
     assert trained[0].rstrip().endswith("train.presentations=60")

@@ -262,18 +262,28 @@ def compare(paper_json: str | Path | None, ours_json: str | Path) -> tuple[str, 
     ]
     data: dict = {"inputs": [str(paper_json), str(ours_json)]}
     worse_all: list[str] = []
-    for key, number, what in (
-        ("table2", 2, "eye-movement error of the last 100 trials (deg), before the perturbation"),
-        ("table3", 3, "the same after the perturbation (camera rotated 15°, blur σ = 2)"),
+    for key, number, what, table in (
+        (
+            "table2",
+            2,
+            "eye-movement error of the last 100 trials (deg), before the perturbation",
+            eye_table,
+        ),
+        (
+            "table3",
+            3,
+            "the same after the perturbation (camera rotated 15°, blur σ = 2)",
+            eye_table,
+        ),
+        (
+            "table4",
+            4,
+            "distance-estimation error (%), held-out photographs, before",
+            distance_table,
+        ),
+        ("table5", 5, "the same after the perturbation", distance_table),
     ):
-        text, cells, worse = eye_table(families, key)
-        md += [f"**Table {number}** — {what}.", "", text, ""]
-        data[key], worse_all = cells, worse_all + worse
-    for key, number, what in (
-        ("table4", 4, "distance-estimation error (%), held-out photographs, before"),
-        ("table5", 5, "the same after the perturbation"),
-    ):
-        text, cells, worse = distance_table(families, key)
+        text, cells, worse = table(families, key)
         md += [f"**Table {number}** — {what}.", "", text, ""]
         data[key], worse_all = cells, worse_all + worse
     md += ["## Cells worse than the paper", ""]
