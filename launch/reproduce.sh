@@ -133,9 +133,10 @@ for family in "${families[@]}"; do
       if [[ "$family" != without && "$name" == *multi_5_20* ]]; then
         for kind in "${other_kinds[@]}"; do
           read -ra settings <<< "${kind#*:}"
-          queue_eval "$run" checkpoint.pt "$run/eval_${kind%%:*}" "${other_args[@]}" "${settings[@]}"
+          # the settings before the options: --distances takes every number after it
+          queue_eval "$run" checkpoint.pt "$run/eval_${kind%%:*}" "${settings[@]}" "${other_args[@]}"
           queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before_${kind%%:*}" \
-            "${other_args[@]}" "${settings[@]}"
+            "${settings[@]}" "${other_args[@]}"
         done
       fi
     done

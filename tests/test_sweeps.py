@@ -264,7 +264,10 @@ def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_fil
     assert len(headline) == 2 and all("multi_5_20_weighted seed=" in l for l in headline)
     evals = [l for l in lines if l.startswith("parallax-eval ")]
     assert evals and all("--robots 16" in l for l in evals)
-    assert any("env.stimuli.source=procedural" in l for l in evals)
+    other = [l for l in evals if "env.stimuli." in l]
+    assert any("env.stimuli.source=procedural" in l for l in other)
+    # positional settings before the options, which would take them for distances
+    assert all(l.index("env.stimuli.") < l.index("--distances") for l in other)
     assert any("env.stimuli.dir=" in l for l in evals)
     assert lines[-1].startswith("python -m parallax.tools.report.compare ")
     assert any(l.startswith("python -m parallax.tools.report.leave_one_out ") for l in lines)

@@ -257,7 +257,12 @@ def compare(paper_json: str | Path | None, ours_json: str | Path) -> tuple[str, 
         f"`{paper_json}` (the paper's algorithm as written, `experiment=paper_<setup>`) and "
         f"`{ours_json}` (our recipe, `experiment=recipe_<setup>`), which `parallax-report` "
         "wrote from the runs of `bash launch/reproduce.sh`. Cells: mean ± sd over seeds (n "
-        "seeds); the paper's published number beside them.",
+        "seeds); the paper's published number beside them. Each family's own report, with "
+        "every run, its figures in the manner of Figs. 7–11 and its failed jobs, is the "
+        f"Markdown beside its JSON ([{Path(paper_json or 'paper.json').stem}.md]"
+        f"({Path(paper_json or 'paper.json').stem}.md), [{Path(ours_json).stem}.md]"
+        f"({Path(ours_json).stem}.md)); what each improvement buys is in "
+        "[leave_one_out.md](leave_one_out.md).",
         "",
     ]
     data: dict = {"inputs": [str(paper_json), str(ours_json)]}
