@@ -57,7 +57,12 @@ def settings(name: str, overrides: Sequence[str] = ()) -> dict:
     """The flattened config of ``experiment=name`` (plus ``overrides``), seed and result-neutral
     settings left out."""
     composed = compose([f"experiment={name}", *overrides])
-    flat = flatten(OmegaConf.to_container(composed, resolve=True))
+    return result_settings(flatten(OmegaConf.to_container(composed, resolve=True)))
+
+
+def result_settings(flat: dict) -> dict:
+    """A flattened config less its seed and the settings that never change results: what two
+    runs of one experiment file share."""
     return {k: v for k, v in flat.items() if k != "seed" and k not in RESULT_NEUTRAL_KEYS}
 
 

@@ -31,7 +31,9 @@ def test_distance_only_variants_are_replays_of_the_trained_file():
 
 
 def test_a_replays_overrides_give_the_replayed_files_config():
-    for p in plan(["paper_multi_5_10", "recipe_multi_5_20_weighted", "without_best_readout"]):
+    plans = plan(["paper_multi_5_10", "recipe_multi_5_20_weighted", "without_best_readout"])
+    assert [p.source for p in plans] == [None, None, "recipe_multi_5_20_weighted"]
+    for p in plans:
         if p.source is not None:
             rebuilt = settings(p.source, list(p.overrides))
             assert rebuilt == settings(p.name)

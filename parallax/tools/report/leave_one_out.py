@@ -27,8 +27,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from parallax.config.plumbing import RESULT_NEUTRAL_KEYS
-from parallax.tools.experiments import ExperimentError, settings
+from parallax.tools.experiments import ExperimentError, result_settings, settings
 from parallax.tools.report.groups import Stat, json_ready
 from parallax.tools.report.runs import (
     ReportError,
@@ -97,11 +96,7 @@ def section(name: str, folder: Path = EXPERIMENTS, docs: Path = IMPROVEMENTS) ->
 
 
 def _key(flat: dict) -> tuple:
-    return tuple(
-        sorted(
-            (k, repr(v)) for k, v in flat.items() if k != "seed" and k not in RESULT_NEUTRAL_KEYS
-        )
-    )
+    return tuple(sorted((k, repr(v)) for k, v in result_settings(flat).items()))
 
 
 def match_runs(runs: Sequence[Run], names: Sequence[str]) -> dict[str, dict[int, Run]]:
