@@ -25,6 +25,9 @@
 #   SEEDS=0,1,2            the seeds of every setting (a sweep over seed=…)
 #   N_JOBS=2               parallel jobs for joblib and for parallax-eval (default: the 2 cores)
 #   SWEEP_ROOT=outputs/multirun
+#   RECORD_ROOT=docs/results/runs   the reproduction's runs (px_record_dir): committed, so that the
+#                          report's numbers and the runs behind them stay together (their
+#                          checkpoints and TensorBoard files are ignored by git)
 #   SOURCE=GLOB            runs to replay for the y / c ablations instead of training new ones
 #   REPORT_ROOT=docs/results    where the reports go
 #   PARALLAX_EVAL=0        skip parallax-eval (the report then uses the trainer's online errors)
@@ -55,6 +58,10 @@ px_run() {
 
 px_sweep_dir() {
   printf '%s/%s' "${SWEEP_ROOT:-outputs/multirun}" "$1"
+}
+
+px_record_dir() {
+  printf '%s/%s' "${RECORD_ROOT:-$report_root/runs}" "$1"
 }
 
 px_sweep() {

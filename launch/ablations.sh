@@ -15,8 +15,8 @@ PARALLAX_EVAL="${PARALLAX_EVAL:-0}" bash "$here/ablation_scales.sh" "${scales_ar
 if [[ -z "${SOURCE:-}" ]]; then
   # shellcheck disable=SC1091
   source "$here/ablation_lib.sh"
-  SOURCE="$(px_runs_with "$(px_sweep_dir reproduce_recipe)" experiment=recipe_multi_5_20_weighted | tr '\n' ' ')"
-  export SOURCE="${SOURCE:-$(px_sweep_dir reproduce_recipe)/<runs with experiment=recipe_multi_5_20_weighted>}"
+  SOURCE="$(px_runs_with "$(px_record_dir recipe)" experiment=recipe_multi_5_20_weighted | tr '\n' ' ')"
+  export SOURCE="${SOURCE:-$(px_record_dir recipe)/<runs with experiment=recipe_multi_5_20_weighted>}"
 fi
 bash "$here/ablation_y.sh" || status=$?
 bash "$here/ablation_queue.sh" || status=$?

@@ -13,9 +13,11 @@
 # HEADLINE_SEEDS (default 0,1,2,3,4).
 # Arguments with '=' are Hydra overrides for every run (e.g. train.presentations=20 for a
 # smoke test); the others name families.
-# Resumable: each family's runs live in a fixed folder ($SWEEP_ROOT/reproduce_<family>) and
-# continue from their checkpoints; a model is evaluated again only when its checkpoint is newer
-# than its eval. Extra settings: launch/ablation_lib.sh (LAUNCHER, N_JOBS, SWEEP_ROOT,
+# Resumable: each family's runs live in a fixed folder, $RECORD_ROOT/<family> (default
+# docs/results/runs/<family>, committed without checkpoints and TensorBoard files). A run with a
+# summary.json is finished and is not trained again, checkpoint or not; an unfinished one
+# continues from its checkpoint; a model is evaluated again only when its checkpoint is newer
+# than its eval. Extra settings: launch/ablation_lib.sh (LAUNCHER, N_JOBS, RECORD_ROOT,
 # REPORT_ROOT, PARALLAX_DRY_RUN), plus
 #   EVAL_ARGS   parallax-eval options of every model (default: the greedy eye on held-out
 #               photographs, one per distance of the grid 3.0, 3.1, …, 10.0 m, and 35 distances
@@ -39,7 +41,7 @@ read -ra without_args <<< "${WITHOUT_ARGS:---robots 16 --greedy-only --between}"
 read -ra other_args <<< "${OTHER_ARGS:---robots 16 --greedy-only --between --distances $(LC_ALL=C seq -s ' ' -f '%.1f' 3.0 0.2 10.0)}"
 # textures of another kind than the photographs: generated ones, and a folder of photographs of
 # other subjects that neither split uses (matplotlib's and scikit-image's sample images)
-other_folder="$(px_sweep_dir stimuli_other)"
+other_folder="$(px_sweep_dir stimuli_other)"  # copies of installed files: not committed
 if [[ -z "${PARALLAX_DRY_RUN:-}" && ! -d "$other_folder" ]]; then
   mkdir -p "$other_folder"
   python - "$other_folder" <<'EOF'
@@ -68,6 +70,39 @@ queue_eval() {  # RUN CHECKPOINT OUT ARGS...: queue an eval unless OUT/eval.json
   fi
 }
 eval_logs=()
+
+unrecorded_seeds() {  # SWEEP NAME SEEDS: those of the comma-separated SEEDS with no finished run
+  local sweep="$1" name="$2" seed want overrides_file missing=() found
+  IFS=, read -ra seeds <<< "$3"
+  for seed in "${seeds[@]}"; do
+    # a finished run: a summary.json beside exactly these overrides (the run folder's name may
+    # be shortened with a hash, so the overrides are read, not the name)
+    want="$(printf '%s\n' "experiment=$name" "seed=$seed" "${overrides[@]}" | sort)"
+    found=0
+    for overrides_file in "$sweep"/*/.hydra/overrides.yaml; do
+      [[ -f "$overrides_file" && -f "$(dirname "$(dirname "$overrides_file")")/summary.json" ]] || continue
+      if [[ "$(sed -n 's/^- //p' "$overrides_file" | sort)" == "$want" ]]; then found=1; break; fi
+    done
+    (( found )) || missing+=("$seed")
+  done
+  (IFS=,; echo "${missing[*]}")
+}
+
+train_unrecorded() {  # SWEEP SEEDS NAME...: one sweep per set of seeds that still lack a run
+  local sweep="$1" seeds="$2" name missing
+  shift 2
+  local -A names_by_seeds=()
+  for name in "$@"; do
+    missing="$(unrecorded_seeds "$sweep" "$name" "$seeds")"
+    [[ -n "$missing" ]] && names_by_seeds[$missing]+="${names_by_seeds[$missing]:+,}$name"
+  done
+  while IFS= read -r missing; do
+    [[ -n "$missing" ]] || continue
+    px_sweep "$sweep" "experiment=${names_by_seeds[$missing]}" "seed=$missing" "${overrides[@]}" \
+      || status=$?
+  done < <(printf '%s\n' "${!names_by_seeds[@]}" | sort)
+}
+
 run_evals() {
   (( ${#evals[@]} )) || return 0
   if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
@@ -101,23 +136,18 @@ for family in "${families[@]}"; do
   candidates=("${names[@]}")
   # the recipe less an improvement on the distance side replays the recipe's own runs
   [[ "$family" == without ]] && candidates=(recipe_multi_5_20_weighted "${names[@]}")
-  mapfile -t plan < <(python -m parallax.tools.experiments "${candidates[@]}")
-  sweep="$(px_sweep_dir "reproduce_$family")"
-  replays="$(px_sweep_dir "reproduce_${family}_replays")"
+  plan_text="$(python -m parallax.tools.experiments "${candidates[@]}")" || exit 2
+  mapfile -t plan <<< "$plan_text"
+  sweep="$(px_record_dir "$family")"
+  replays="$(px_record_dir "${family}_replays")"
   headline=() others=()
   for line in "${plan[@]}"; do
     read -r action name _ <<< "$line"
     [[ "$action" == train && " ${names[*]} " == *" $name "* ]] || continue
     if [[ "$family" != without && "$name" == *multi_5_20* ]]; then headline+=("$name"); else others+=("$name"); fi
   done
-  if (( ${#headline[@]} )); then
-    px_sweep "$sweep" "experiment=$(IFS=,; echo "${headline[*]}")" "seed=${HEADLINE_SEEDS:-0,1,2,3,4}" \
-      "${overrides[@]}" || status=$?
-  fi
-  if (( ${#others[@]} )); then
-    px_sweep "$sweep" "experiment=$(IFS=,; echo "${others[*]}")" "seed=${SEEDS:-0,1,2}" \
-      "${overrides[@]}" || status=$?
-  fi
+  train_unrecorded "$sweep" "${HEADLINE_SEEDS:-0,1,2,3,4}" "${headline[@]}"
+  train_unrecorded "$sweep" "${SEEDS:-0,1,2}" "${others[@]}"
 
   # every trained multiple-position model, before and after the perturbation (Tables 4–5)
   for name in "${headline[@]}" "${others[@]}"; do
@@ -147,7 +177,7 @@ for family in "${families[@]}"; do
   for line in "${plan[@]}"; do
     read -r action name source settings <<< "$line"
     [[ "$action" == replay && " ${names[*]} " == *" $name "* ]] || continue
-    source_sweep="$(px_sweep_dir "reproduce_${source%%_*}")"
+    source_sweep="$(px_record_dir "${source%%_*}")"
     mapfile -t runs < <(px_runs_with "$source_sweep" "experiment=$source")
     [[ -n "${PARALLAX_DRY_RUN:-}" ]] && runs=("$source_sweep/<runs of $source>")
     finished=()
@@ -165,7 +195,7 @@ for family in "${families[@]}"; do
     mapfile -t weighted < <(px_runs_with "$sweep" experiment=recipe_multi_5_20_weighted)
     for run in "${weighted[@]}"; do
       seed="$(sed -n 's/^seed: //p' "$run/config.yaml" 2>/dev/null || true)"
-      if [[ -f "$run/summary.json" ]]; then
+      if [[ -f "$run/summary.json" && -f "$run/checkpoint.pt" ]]; then
         keep="$report_root/checkpoints/multi_5_20_weighted_seed${seed:-N}"
         px_run mkdir -p "$keep"
         px_run cp "$run/config.yaml" "$run/checkpoint.pt" "$run/checkpoint_before_perturbation.pt" "$keep/"
@@ -183,7 +213,7 @@ for family in "${families[@]}"; do
   [[ -d "$replays" || -n "${PARALLAX_DRY_RUN:-}" ]] && sources+=("$replays")
   if [[ "$family" == without ]]; then
     px_run python -m parallax.tools.report.leave_one_out "${sources[@]}" \
-      "$(px_sweep_dir reproduce_recipe)" --out "$report_root" "${notes[@]}" || status=$?
+      "$(px_record_dir recipe)" --out "$report_root" "${notes[@]}" || status=$?
   else
     px_report "$report_root" "$family.md" "Tables 2–5 and Figs. 7–11 ($family)" paper \
       "${sources[@]}" "${notes[@]}" || status=$?

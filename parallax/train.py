@@ -124,6 +124,16 @@ def train(cfg: DictConfig) -> float:
             f"{trainer.checkpoint_path} exists; resume=true continues that run, or choose "
             "another directory with hydra.run.dir=...",
         )
+    if trainer.summary_path.exists() and not trainer.checkpoint_path.exists():
+        # a finished run kept as a record without its checkpoint (docs/results/runs): training
+        # again from the start would overwrite the record's metrics
+        trainer.exp.close()
+        refuse(
+            "hydra.run.dir",
+            str(trainer.run_dir),
+            "holds a finished run (summary.json) without its checkpoint; choose another "
+            "directory with hydra.run.dir=...",
+        )
     if trainer.checkpoint_path.exists() and (trainer.run_dir / RUN_CONFIG_NAME).is_file():
         # Run directories are named by the overrides only: a run trained with another default
         # would otherwise be continued with this one.

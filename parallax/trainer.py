@@ -68,6 +68,10 @@ class Trainer:
     def metrics_path(self) -> Path:
         return self.run_dir / "metrics.jsonl"
 
+    @property
+    def summary_path(self) -> Path:
+        return self.run_dir / "summary.json"
+
     # --- checkpoints -----------------------------------------------------------------------
     def state_dict(self) -> dict:
         return {
@@ -390,7 +394,7 @@ class Trainer:
             bar.close()
             writer.close()
         summary = self.summary()
-        (self.run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        self.summary_path.write_text(json.dumps(summary, indent=2) + "\n")
         return summary
 
 

@@ -220,7 +220,13 @@ def test_submitit_local_sweep_survives_a_requeue(tmp_path, tiny_overrides):
 def _dry_run(script: str, tmp_path: Path, *args: str, **settings: str) -> list[str]:
     """The commands a launch script prints with PARALLAX_DRY_RUN=1, sweeping below tmp_path
     (``args``: its arguments; ``settings``: more of its environment variables)."""
-    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "SWEEP_ROOT": str(tmp_path), **settings}
+    env = {
+        **os.environ,
+        "PARALLAX_DRY_RUN": "1",
+        "SWEEP_ROOT": str(tmp_path),
+        "RECORD_ROOT": str(tmp_path),
+        **settings,
+    }
     result = subprocess.run(
         ["bash", str(REPO / "launch" / script), *args],
         cwd=tmp_path,
@@ -273,6 +279,26 @@ def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_fil
     assert any(l.startswith("python -m parallax.tools.report.leave_one_out ") for l in lines)
 
 
+def test_the_reproduction_does_not_train_a_finished_run_again(tmp_path):
+    """A run with a summary.json is a record (committed without its checkpoint): only the seeds
+    without one are trained, and a record made with other overrides does not count."""
+    for folder, overrides in {
+        "done": ["experiment=recipe_multi_5_20_weighted", "seed=3"],
+        "smoke": ["experiment=recipe_multi_5_20_weighted", "seed=4", "train.presentations=7"],
+        "unfinished": ["experiment=recipe_multi_5_20_weighted", "seed=0"],
+    }.items():
+        (tmp_path / "recipe" / folder / ".hydra").mkdir(parents=True)
+        (tmp_path / "recipe" / folder / ".hydra" / "overrides.yaml").write_text(
+            "".join(f"- {o}\n" for o in overrides)
+        )
+    (tmp_path / "recipe" / "done" / "summary.json").write_text("{}")
+    (tmp_path / "recipe" / "smoke" / "summary.json").write_text("{}")
+    trained = [l for l in _dry_run("reproduce.sh", tmp_path, "recipe") if "parallax-train" in l]
+    headline = [l for l in trained if "experiment=recipe_multi_5_20_weighted " in l]
+    assert len(headline) == 1 and headline[0].rstrip().endswith("seed=0\\,1\\,2\\,4"), trained
+    assert len(trained) == 2  # the other recipe files, all three seeds
+
+
 def test_a_bad_job_fails_alone_in_a_joblib_sweep(tmp_path, tiny_overrides):
     """One job with an invalid value must not take the launcher's other jobs down with it."""
     sweep_dir = tmp_path / "sweep"
@@ -323,5 +349,5 @@ def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_pat
     assert len(trained) == 1 and "coder=coarse\\,fine\\,two_scale" in trained[0]
     assert trained[0].rstrip().endswith("train.presentations=60")
     replays = [l for l in lines if l.startswith("parallax-replay ")]
-    assert len(replays) == 3 and all(f"{tmp_path}/reproduce_recipe/" in l for l in replays)
+    assert len(replays) == 3 and all(f"{tmp_path}/recipe/" in l for l in replays)
     assert len([l for l in lines if l.startswith("parallax-report ")]) == 3

@@ -219,3 +219,19 @@ def test_a_bad_job_of_a_sweep_fails_alone(tmp_path, tiny_overrides):
     # the bad job stopped before the trainer wrote anything: only Hydra's own files are there
     assert {p.name for p in (sweep / "0").iterdir()} <= {".hydra", "train.log"}
     assert (sweep / "1" / "summary.json").is_file()
+
+
+def test_a_finished_run_without_its_checkpoint_is_not_trained_over(tmp_path, tiny_overrides):
+    """A committed record (summary.json and metrics, no checkpoint) must not be overwritten by a
+    fresh run into the same directory."""
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    record = {"summary.json": '{"mae": 0.1}\n', "metrics.jsonl": '{"presentation": 1}\n'}
+    for name, text in record.items():
+        (run_dir / name).write_text(text)
+    proc = _parallax_train([*tiny_overrides, f"hydra.run.dir={run_dir}"], tmp_path)
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert proc.returncode == 2, proc.stderr
+    assert len(lines) == 1 and lines[0].startswith(PREFIX + f"hydra.run.dir={run_dir}"), lines
+    assert {name: (run_dir / name).read_text() for name in record} == record
+    assert not (run_dir / "checkpoint.pt").exists() and not (run_dir / "tb").exists()
