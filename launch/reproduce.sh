@@ -120,6 +120,34 @@ run_evals() {
   evals=() eval_logs=()
 }
 
+evaluate() {  # SWEEP NAME...: the evaluations of those experiments' finished models
+  local sweep="$1" name run runs args kind settings
+  shift
+  # every multiple-position model, before and after the perturbation (Tables 4–5)
+  for name in "$@"; do
+    [[ "$name" == *single* ]] && continue
+    runs=()
+    mapfile -t runs < <(px_runs_with "$sweep" "experiment=$name")
+    [[ -n "${PARALLAX_DRY_RUN:-}" ]] && runs=("$sweep/<runs of $name>")
+    for run in "${runs[@]}"; do
+      [[ -n "${PARALLAX_DRY_RUN:-}" || -f "$run/summary.json" ]] || continue
+      if [[ "$family" == without ]]; then args=("${without_args[@]}"); else args=("${eval_args[@]}"); fi
+      queue_eval "$run" checkpoint.pt "$run" "${args[@]}"
+      queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before" "${args[@]}"
+      if [[ "$family" != without && "$name" == *multi_5_20* ]]; then
+        for kind in "${other_kinds[@]}"; do
+          read -ra settings <<< "${kind#*:}"
+          # the settings before the options: --distances takes every number after it
+          queue_eval "$run" checkpoint.pt "$run/eval_${kind%%:*}" "${settings[@]}" "${other_args[@]}"
+          queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before_${kind%%:*}" \
+            "${settings[@]}" "${other_args[@]}"
+        done
+      fi
+    done
+  done
+  run_evals
+}
+
 for family in "${families[@]}"; do
   names=()
   for file in conf/experiment/"${family}"_*.yaml; do
@@ -146,32 +174,11 @@ for family in "${families[@]}"; do
     [[ "$action" == train && " ${names[*]} " == *" $name "* ]] || continue
     if [[ "$family" != without && "$name" == *multi_5_20* ]]; then headline+=("$name"); else others+=("$name"); fi
   done
+  # the headline models first, evaluated before the other files are trained
   train_unrecorded "$sweep" "${HEADLINE_SEEDS:-0,1,2,3,4}" "${headline[@]}"
+  evaluate "$sweep" "${headline[@]}"
   train_unrecorded "$sweep" "${SEEDS:-0,1,2}" "${others[@]}"
-
-  # every trained multiple-position model, before and after the perturbation (Tables 4–5)
-  for name in "${headline[@]}" "${others[@]}"; do
-    [[ "$name" == *single* ]] && continue
-    runs=()
-    mapfile -t runs < <(px_runs_with "$sweep" "experiment=$name")
-    [[ -n "${PARALLAX_DRY_RUN:-}" ]] && runs=("$sweep/<runs of $name>")
-    for run in "${runs[@]}"; do
-      [[ -n "${PARALLAX_DRY_RUN:-}" || -f "$run/summary.json" ]] || continue
-      if [[ "$family" == without ]]; then args=("${without_args[@]}"); else args=("${eval_args[@]}"); fi
-      queue_eval "$run" checkpoint.pt "$run" "${args[@]}"
-      queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before" "${args[@]}"
-      if [[ "$family" != without && "$name" == *multi_5_20* ]]; then
-        for kind in "${other_kinds[@]}"; do
-          read -ra settings <<< "${kind#*:}"
-          # the settings before the options: --distances takes every number after it
-          queue_eval "$run" checkpoint.pt "$run/eval_${kind%%:*}" "${settings[@]}" "${other_args[@]}"
-          queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before_${kind%%:*}" \
-            "${settings[@]}" "${other_args[@]}"
-        done
-      fi
-    done
-  done
-  run_evals
+  evaluate "$sweep" "${others[@]}"
 
   # the experiments that differ only in the distance learner, from their source's runs
   for line in "${plan[@]}"; do
