@@ -61,11 +61,13 @@ other_kinds=(
 
 status=0
 evals=()  # one parallax-eval command line each, run N_JOBS at a time
-queue_eval() {  # RUN CHECKPOINT OUT ARGS...: queue an eval unless OUT/eval.json is newer
-  local run="$1" ckpt="$2" out="$3"
+queue_eval() {  # MODEL CHECKPOINT OUT ARGS...: queue an eval unless OUT/eval.json is up to date
+  # (newer than the run's own checkpoint; from a committed copy, a checkout-dated file, when missing)
+  local model="$1" ckpt="$2" out="$3"
   shift 3
-  if [[ -n "${PARALLAX_DRY_RUN:-}" || ( -f "$run/$ckpt" && ! "$out/eval.json" -nt "$run/$ckpt" ) ]]; then
-    evals+=("$(printf '%q ' parallax-eval "$run" --checkpoint "$ckpt" --out "$out" "$@")")
+  if [[ -n "${PARALLAX_DRY_RUN:-}" ]] || { [[ -f "$model/$ckpt" ]] && { [[ ! -f "$out/eval.json" ]] \
+      || { [[ "$out" == "$model"* && "$model/$ckpt" -nt "$out/eval.json" ]]; }; }; }; then
+    evals+=("$(printf '%q ' parallax-eval "$model" --checkpoint "$ckpt" --out "$out" "$@")")
     eval_logs+=("$out/eval.log")
   fi
 }
@@ -121,7 +123,7 @@ run_evals() {
 }
 
 evaluate() {  # SWEEP NAME...: the evaluations of those experiments' finished models
-  local sweep="$1" name run runs args kind settings
+  local sweep="$1" name run runs args kind settings model
   shift
   # every multiple-position model, before and after the perturbation (Tables 4–5)
   for name in "$@"; do
@@ -132,14 +134,19 @@ evaluate() {  # SWEEP NAME...: the evaluations of those experiments' finished mo
     for run in "${runs[@]}"; do
       [[ -n "${PARALLAX_DRY_RUN:-}" || -f "$run/summary.json" ]] || continue
       if [[ "$family" == without ]]; then args=("${without_args[@]}"); else args=("${eval_args[@]}"); fi
-      queue_eval "$run" checkpoint.pt "$run" "${args[@]}"
-      queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before" "${args[@]}"
+      model="$run"
+      if [[ -z "${PARALLAX_DRY_RUN:-}" && ! -f "$run/checkpoint.pt" && "$name" == recipe_multi_5_20_weighted ]]; then
+        # a committed record: its models are kept in docs/results/checkpoints
+        model="$report_root/checkpoints/multi_5_20_weighted_seed$(sed -n 's/^seed: //p' "$run/config.yaml")"
+      fi
+      queue_eval "$model" checkpoint.pt "$run" "${args[@]}"
+      queue_eval "$model" checkpoint_before_perturbation.pt "$run/eval_before" "${args[@]}"
       if [[ "$family" != without && "$name" == *multi_5_20* ]]; then
         for kind in "${other_kinds[@]}"; do
           read -ra settings <<< "${kind#*:}"
           # the settings before the options: --distances takes every number after it
-          queue_eval "$run" checkpoint.pt "$run/eval_${kind%%:*}" "${settings[@]}" "${other_args[@]}"
-          queue_eval "$run" checkpoint_before_perturbation.pt "$run/eval_before_${kind%%:*}" \
+          queue_eval "$model" checkpoint.pt "$run/eval_${kind%%:*}" "${settings[@]}" "${other_args[@]}"
+          queue_eval "$model" checkpoint_before_perturbation.pt "$run/eval_before_${kind%%:*}" \
             "${settings[@]}" "${other_args[@]}"
         done
       fi
