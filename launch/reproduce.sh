@@ -74,17 +74,17 @@ queue_eval() {  # MODEL CHECKPOINT OUT ARGS...: queue an eval unless OUT/eval.js
 eval_logs=()
 
 unrecorded_seeds() {  # SWEEP NAME SEEDS: those of the comma-separated SEEDS with no finished run
-  local sweep="$1" name="$2" seed want overrides_file missing=() found
+  local sweep="$1" name="$2" seed want run missing=() found
   IFS=, read -ra seeds <<< "$3"
   for seed in "${seeds[@]}"; do
     # a finished run: a summary.json beside exactly these overrides (the run folder's name may
     # be shortened with a hash, so the overrides are read, not the name)
     want="$(printf '%s\n' "experiment=$name" "seed=$seed" "${overrides[@]}" | sort)"
     found=0
-    for overrides_file in "$sweep"/*/.hydra/overrides.yaml; do
-      [[ -f "$overrides_file" && -f "$(dirname "$(dirname "$overrides_file")")/summary.json" ]] || continue
-      if [[ "$(sed -n 's/^- //p' "$overrides_file" | sort)" == "$want" ]]; then found=1; break; fi
-    done
+    while IFS= read -r run; do
+      [[ -f "$run/summary.json" ]] || continue
+      if [[ "$(sed -n 's/^- //p' "$run/.hydra/overrides.yaml" | sort)" == "$want" ]]; then found=1; break; fi
+    done < <(px_runs_with "$sweep" "experiment=$name")
     (( found )) || missing+=("$seed")
   done
   (IFS=,; echo "${missing[*]}")
