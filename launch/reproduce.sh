@@ -61,13 +61,20 @@ other_kinds=(
 
 status=0
 evals=()  # one parallax-eval command line each, run N_JOBS at a time
-queue_eval() {  # MODEL CHECKPOINT OUT ARGS...: queue an eval unless OUT/eval.json is up to date
-  # (newer than the run's own checkpoint; from a committed copy, a checkout-dated file, when missing)
+eval_due() {  # MODEL CHECKPOINT OUT: the checkpoint exists and OUT/eval.json is missing, or older
+  # than the run's own checkpoint (a committed copy's date is the checkout's: only when missing)
   local model="$1" ckpt="$2" out="$3"
+  [[ -n "${PARALLAX_DRY_RUN:-}" ]] && return 0
+  [[ -f "$model/$ckpt" ]] || return 1
+  [[ ! -f "$out/eval.json" ]] || [[ "$out" == "$model"* && "$model/$ckpt" -nt "$out/eval.json" ]]
+}
+queue_eval() {  # MODEL CHECKPOINT OUT ARGS...: queue an eval unless OUT/eval.json is up to date;
+  # ARGS may start with env.stimuli.KEY=VALUE settings, which go right after MODEL
+  local model="$1" ckpt="$2" out="$3" settings=()
   shift 3
-  if [[ -n "${PARALLAX_DRY_RUN:-}" ]] || { [[ -f "$model/$ckpt" ]] && { [[ ! -f "$out/eval.json" ]] \
-      || { [[ "$out" == "$model"* && "$model/$ckpt" -nt "$out/eval.json" ]]; }; }; }; then
-    evals+=("$(printf '%q ' parallax-eval "$model" --checkpoint "$ckpt" --out "$out" "$@")")
+  while (( $# )) && [[ "$1" == env.stimuli.* ]]; do settings+=("$1"); shift; done
+  if eval_due "$model" "$ckpt" "$out"; then
+    evals+=("$(printf '%q ' parallax-eval "$model" "${settings[@]}" --checkpoint "$ckpt" --out "$out" "$@")")
     eval_logs+=("$out/eval.log")
   fi
 }
@@ -144,7 +151,6 @@ evaluate() {  # SWEEP NAME...: the evaluations of those experiments' finished mo
       if [[ "$family" != without && "$name" == *multi_5_20* ]]; then
         for kind in "${other_kinds[@]}"; do
           read -ra settings <<< "${kind#*:}"
-          # the settings before the options: --distances takes every number after it
           queue_eval "$model" checkpoint.pt "$run/eval_${kind%%:*}" "${settings[@]}" "${other_args[@]}"
           queue_eval "$model" checkpoint_before_perturbation.pt "$run/eval_before_${kind%%:*}" \
             "${settings[@]}" "${other_args[@]}"

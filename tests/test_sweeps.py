@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -20,6 +21,7 @@ from pathlib import Path
 import pytest
 
 from parallax.config import CONFIG_MODULE, CONFIG_NAME, compose, register_resolvers
+from parallax.tools.evaluate import build_parser
 from parallax.trainer import Trainer
 
 REPO = Path(__file__).resolve().parents[1]
@@ -270,11 +272,12 @@ def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_fil
     assert len(headline) == 2 and all("multi_5_20_weighted seed=" in l for l in headline)
     evals = [l for l in lines if l.startswith("parallax-eval ")]
     assert evals and all("--robots 16" in l for l in evals)
-    other = [l for l in evals if "env.stimuli." in l]
-    assert any("env.stimuli.source=procedural" in l for l in other)
-    # positional settings before the options, which would take them for distances
-    assert all(l.index("env.stimuli.") < l.index("--distances") for l in other)
-    assert any("env.stimuli.dir=" in l for l in evals)
+    # every printed eval is a command line that parallax-eval's own parser takes
+    parsed = [build_parser().parse_intermixed_args(shlex.split(l)[1:]) for l in evals]
+    settings = [s for args in parsed for s in args.stimuli]
+    assert "env.stimuli.source=procedural" in settings
+    assert any(s.startswith("env.stimuli.dir=") for s in settings)
+    assert all(args.robots == 16 and args.greedy_only for args in parsed)
     assert lines[-1].startswith("python -m parallax.tools.report.compare ")
     assert any(l.startswith("python -m parallax.tools.report.leave_one_out ") for l in lines)
 

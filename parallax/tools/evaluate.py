@@ -428,7 +428,10 @@ def format_eval(result: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> None:
+def build_parser() -> argparse.ArgumentParser:
+    """parallax-eval's command line: RUN, then env.stimuli.KEY=VALUE settings and options in any
+    order (a setting must not follow --distances or --between, which take every number after
+    them)."""
     parser = argparse.ArgumentParser(prog="parallax-eval", description=__doc__.split("\n\n")[0])
     parser.add_argument("run_dir", help="a run directory written by parallax-train")
     parser.add_argument(
@@ -499,7 +502,12 @@ def main(argv: list[str] | None = None) -> None:
         action="store_true",
         help="leave out the sampled policy's trials (half the time; no sampled MAE)",
     )
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> None:
+    # intermixed: the positional settings may come after options such as --out
+    args = build_parser().parse_intermixed_args(argv)
     try:
         result = evaluate(
             args.run_dir,
