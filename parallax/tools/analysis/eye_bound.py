@@ -1,0 +1,161 @@
+"""How well any distance learner could do with the eye an evaluation measured (paper §3.5,
+Tables 4–5): the eye's share of the distance error, apart from the learner's.
+
+A panel at distance d is seen at lateral position l_p at the pan α*_p ≈ atan(l_p / d), so each
+element q_p of s is nearly linear in 1/d. The estimator here fits, for every position p, the
+line 1/d = a_p + b_p·q_p and averages the positions' answers with weights 1/(residual variance):
+a small, physically motivated learner that cannot overfit 71 presentations. It is fitted to the
+evaluation's own held-out presentations, leaving out each presentation in turn (leave-one-out),
+so its error is what this eye's vectors allow when the learner is as good as such a line can be
+(an oracle: the network learns from the training queue instead). Beside it, the run's own
+network (a fresh distance learner with the run's settings, its queue the size of the training
+folds) fitted to the same vectors by 5-fold cross-validation, and the line estimator on perfect
+pans rounded to the action grid (the common step of policy.actions, from pan 0): the floor of
+the action set itself.
+
+    python -m parallax.tools.analysis.eye_bound EVAL_DIR…   # folders holding an eval.json
+
+For each evaluation it prints the network's distance error (parallax-eval's), the two learners'
+fitted to the evaluation's own eye movements, and the action grid's floor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from functools import cache, reduce
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from parallax.config import load_run_config
+from parallax.distance.metrics import distance_error_by_range
+from parallax.experiment import distance_learner
+from parallax.tools.analysis.baselines import target_pans
+
+
+def position_line_estimates(train_pans, train_distances, pans) -> np.ndarray:
+    """Distances for the vectors ``pans`` (M, r) from per-position lines 1/d = a_p + b_p·q_p
+    fitted to (``train_pans`` (N, r), ``train_distances`` (N,)), combined by inverse residual
+    variance."""
+    train_pans, pans = np.asarray(train_pans, float), np.asarray(pans, float)
+    inverse = 1.0 / np.asarray(train_distances, float)
+    answers, weights = [], []
+    for p in range(train_pans.shape[1]):
+        design = np.column_stack([np.ones(len(inverse)), train_pans[:, p]])
+        line, *_ = np.linalg.lstsq(design, inverse, rcond=None)
+        residual = inverse - design @ line
+        answers.append(line[0] + line[1] * pans[:, p])
+        weights.append(1.0 / max(float(residual.var()), 1e-18))
+    return 1.0 / np.average(np.array(answers), axis=0, weights=weights)
+
+
+def leave_one_out(pans, distances) -> np.ndarray:
+    """Each presentation's distance from the estimator fitted to all the others."""
+    pans, distances = np.asarray(pans, float), np.asarray(distances, float)
+    if len(distances) < 4:
+        raise ValueError(f"leave-one-out needs at least 4 presentations, got {len(distances)}")
+    keep = ~np.eye(len(distances), dtype=bool)
+    return np.array(
+        [
+            position_line_estimates(pans[keep[i]], distances[keep[i]], pans[i : i + 1])[0]
+            for i in range(len(distances))
+        ]
+    )
+
+
+def network_cross_validated(cfg, pans, distances, folds: int = 5) -> np.ndarray:
+    """Each presentation's distance from a fresh distance learner of the run's settings (its
+    queue as large as a training fold, so that it fits once) trained on the other folds; the
+    folds interleave, so each spans the distances."""
+    pans, distances = np.asarray(pans, float), np.asarray(distances, float)
+    estimates = np.empty_like(distances)
+    for fold in range(folds):
+        held = np.arange(len(distances)) % folds == fold
+        settings = cfg.copy()
+        settings.distance.queue_size = int((~held).sum())
+        settings.distance.fit_from = None
+        learner = distance_learner(settings)
+        learner.observe_batch(pans[~held], list(distances[~held]))
+        estimates[held] = learner.predict(pans[held])
+    return estimates
+
+
+@cache
+def perfect_pans(lateral_positions: tuple[float, ...], distances: tuple[float, ...]) -> np.ndarray:
+    """α* (degrees) at each lateral position (columns) for each distance (rows)."""
+    return np.column_stack([target_pans(l, list(distances)) for l in lateral_positions])
+
+
+def action_grid_step(actions) -> float:
+    """The grid of pans reachable from 0 with these increments (degrees): their common step."""
+    thousandths = [round(abs(float(a)) * 1000) for a in actions if round(abs(float(a)) * 1000)]
+    return reduce(math.gcd, thousandths) / 1000.0
+
+
+def eye_bound(eval_dir: str | Path) -> dict:
+    """The network's error, the two learners' fitted to the same eye movements, and the action
+    grid's floor (module docstring) for the evaluation in ``eval_dir``."""
+    path = Path(eval_dir) / "eval.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{eval_dir} holds no eval.json (run parallax-eval first)")
+    result = json.loads(path.read_text())
+    readout = result["readout"]
+    distances = np.asarray(result["greedy_samples"]["grid"]["distances"], float)
+    pans = np.asarray(result["greedy_samples_by_readout"][readout]["grid"]["pans"], float)
+    cfg = load_run_config(result["run_dir"])
+    if int(cfg.train.threads) > 0:  # as in training: small matrices, and a shared machine
+        torch.set_num_threads(int(cfg.train.threads))
+    step = action_grid_step(cfg.policy.actions)
+    laterals = tuple(float(l) for l in cfg.curriculum.lateral_positions)
+    perfect = perfect_pans(laterals, tuple(float(d) for d in distances))
+    rounded = np.round(perfect / step) * step
+    network = result.get("distance", {}).get("by_range", {}).get("total", math.nan)
+
+    def error(estimates: np.ndarray) -> float:
+        return distance_error_by_range(estimates, distances)["total"]
+
+    return {
+        "eval": str(eval_dir),
+        "readout": readout,
+        "trials": int(len(distances)),
+        "network": float(network),
+        "network_on_this_eye": error(network_cross_validated(cfg, pans, distances)),
+        "lines_on_this_eye": error(leave_one_out(pans, distances)),
+        "action_grid_step_deg": step,
+        "floor": error(leave_one_out(rounded, distances)),
+    }
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.tools.analysis.eye_bound", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("evals", nargs="+", metavar="EVAL_DIR", help="folders with an eval.json")
+    parser.add_argument("--json", default=None, help="also write the rows to this JSON file")
+    args = parser.parse_args(argv)
+    try:
+        rows = [eye_bound(folder) for folder in args.evals]
+    except (FileNotFoundError, ValueError, KeyError) as exc:
+        print(f"eye_bound: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    print(
+        "| evaluation | trials | network as trained (%) | network fitted to this eye (%) | "
+        "lines fitted to this eye (%) | action grid floor (%) |"
+    )
+    print("|---|---|---|---|---|---|")
+    for row in rows:
+        print(
+            f"| {row['eval']} | {row['trials']} | {row['network']:.2f} | "
+            f"{row['network_on_this_eye']:.2f} | {row['lines_on_this_eye']:.2f} | "
+            f"{row['floor']:.2f} |"
+        )
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

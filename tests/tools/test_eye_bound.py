@@ -1,0 +1,65 @@
+"""What the eye allows (parallax.tools.analysis.eye_bound): the estimators fitted to an
+evaluation's own eye movements, and the action grid's floor."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from omegaconf import OmegaConf
+
+from parallax.config import compose
+from parallax.tools.analysis import eye_bound
+from tests.conftest import TINY
+
+DISTANCES = [3.0 + 0.25 * i for i in range(29)]  # 3.0 … 10.0 m
+
+
+def _eval_dir(tmp_path, pans_of, name="eval"):
+    """A run folder (the TINY config) holding an eval.json whose greedy eye reached
+    ``pans_of(perfect pans)``."""
+    run = tmp_path / name
+    run.mkdir()
+    cfg = compose(TINY)
+    (run / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+    laterals = tuple(float(l) for l in cfg.curriculum.lateral_positions)
+    pans = pans_of(eye_bound.perfect_pans(laterals, tuple(DISTANCES)))
+    (run / "eval.json").write_text(
+        json.dumps(
+            {
+                "run_dir": str(run),
+                "readout": "best_reward",
+                "distance": {"by_range": {"total": 9.99}},
+                "greedy_samples": {"grid": {"distances": DISTANCES}},
+                "greedy_samples_by_readout": {"best_reward": {"grid": {"pans": pans.tolist()}}},
+            }
+        )
+    )
+    return run
+
+
+def test_the_action_grid_is_the_common_step_of_the_increments():
+    assert eye_bound.action_grid_step([-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2]) == 0.05
+    assert eye_bound.action_grid_step([-0.3, 0.0, 0.2]) == 0.1
+
+
+def test_an_eye_on_the_action_grid_is_at_the_floor_and_a_scattered_eye_is_worse(tmp_path):
+    step = 0.05
+    on_grid = eye_bound.eye_bound(_eval_dir(tmp_path, lambda p: np.round(p / step) * step))
+    noise = np.random.default_rng(0).normal(0.0, 0.1, (len(DISTANCES), 2))
+    scattered = eye_bound.eye_bound(_eval_dir(tmp_path, lambda p: p + noise, "scattered"))
+    assert on_grid["trials"] == len(DISTANCES) and on_grid["network"] == 9.99
+    assert on_grid["lines_on_this_eye"] == pytest.approx(on_grid["floor"])
+    assert scattered["floor"] == pytest.approx(on_grid["floor"])
+    assert scattered["lines_on_this_eye"] > 3 * on_grid["lines_on_this_eye"]
+    assert scattered["network_on_this_eye"] > on_grid["lines_on_this_eye"]
+    assert 0 < on_grid["floor"] < 5
+
+
+def test_a_folder_without_an_eval_is_one_line_and_exit_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        eye_bound.main([str(tmp_path)])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no eval.json" in err[0]
