@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Reproduces the results report (docs/results/): every experiment of a family for every seed,
-# parallax-eval of each multiple-position model before and after the perturbation, the committed
-# checkpoints, and the reports. A family is a prefix of the experiment files in conf/experiment/:
+# parallax-eval of each multiple-position model before and after the perturbation, the 5–20 cm
+# models of recipe and paper kept in docs/results/checkpoints/<experiment>_seed<n> (committed), and
+# the reports. A family is a prefix of the experiment files in conf/experiment/:
 #     bash launch/reproduce.sh                      # recipe, paper and without, then the report
 #     bash launch/reproduce.sh paper                # the paper's algorithm as written (paper_*)
 #     bash launch/reproduce.sh recipe               # ours (recipe_*)
@@ -112,6 +113,25 @@ train_unrecorded() {  # SWEEP SEEDS NAME...: one sweep per set of seeds that sti
   done < <(printf '%s\n' "${!names_by_seeds[@]}" | sort)
 }
 
+kept_model() {  # NAME RUN: where the reproduction keeps the models (config and both checkpoints)
+  # of RUN, a run of experiment NAME
+  printf '%s/checkpoints/%s_seed%s' "$report_root" "$1" "$(sed -n 's/^seed: //p' "$2/config.yaml")"
+}
+
+keep_models() {  # SWEEP NAME...: the finished runs' models, committed beside the records, so that
+  # anyone can run parallax-eval on them and a later reproduction can evaluate a committed record
+  local sweep="$1" name run keep
+  shift
+  for name in "$@"; do
+    while IFS= read -r run; do
+      [[ -f "$run/summary.json" && -f "$run/checkpoint.pt" ]] || continue
+      keep="$(kept_model "$name" "$run")"
+      px_run mkdir -p "$keep"
+      px_run cp "$run/config.yaml" "$run/checkpoint.pt" "$run/checkpoint_before_perturbation.pt" "$keep/"
+    done < <(px_runs_with "$sweep" "experiment=$name")
+  done
+}
+
 run_evals() {
   (( ${#evals[@]} )) || return 0
   if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
@@ -142,9 +162,9 @@ evaluate() {  # SWEEP NAME...: the evaluations of those experiments' finished mo
       [[ -n "${PARALLAX_DRY_RUN:-}" || -f "$run/summary.json" ]] || continue
       if [[ "$family" == without ]]; then args=("${without_args[@]}"); else args=("${eval_args[@]}"); fi
       model="$run"
-      if [[ -z "${PARALLAX_DRY_RUN:-}" && ! -f "$run/checkpoint.pt" && "$name" == recipe_multi_5_20_weighted ]]; then
-        # a committed record: its models are kept in docs/results/checkpoints
-        model="$report_root/checkpoints/multi_5_20_weighted_seed$(sed -n 's/^seed: //p' "$run/config.yaml")"
+      if [[ -z "${PARALLAX_DRY_RUN:-}" && ! -f "$run/checkpoint.pt" ]]; then
+        # a committed record: a headline model is kept in docs/results/checkpoints
+        model="$(kept_model "$name" "$run")"
       fi
       queue_eval "$model" checkpoint.pt "$run" "${args[@]}"
       queue_eval "$model" checkpoint_before_perturbation.pt "$run/eval_before" "${args[@]}"
@@ -187,8 +207,9 @@ for family in "${families[@]}"; do
     [[ "$action" == train && " ${names[*]} " == *" $name "* ]] || continue
     if [[ "$family" != without && "$name" == *multi_5_20* ]]; then headline+=("$name"); else others+=("$name"); fi
   done
-  # the headline models first, evaluated before the other files are trained
+  # the headline models first, kept and evaluated before the other files are trained
   train_unrecorded "$sweep" "${HEADLINE_SEEDS:-0,1,2,3,4}" "${headline[@]}"
+  keep_models "$sweep" "${headline[@]}"
   evaluate "$sweep" "${headline[@]}"
   train_unrecorded "$sweep" "${SEEDS:-0,1,2}" "${others[@]}"
   evaluate "$sweep" "${others[@]}"
@@ -208,20 +229,6 @@ for family in "${families[@]}"; do
     # shellcheck disable=SC2086  # the overrides are words
     px_run parallax-replay "${finished[@]}" --out "$replays/$name" $settings || status=$?
   done
-
-  if [[ "$family" == recipe ]]; then
-    # the recipe's 5–20 cm weighted models, before and after the perturbation, so that anyone can
-    # run parallax-eval on them without training: a run directory of its own per seed
-    mapfile -t weighted < <(px_runs_with "$sweep" experiment=recipe_multi_5_20_weighted)
-    for run in "${weighted[@]}"; do
-      seed="$(sed -n 's/^seed: //p' "$run/config.yaml" 2>/dev/null || true)"
-      if [[ -f "$run/summary.json" && -f "$run/checkpoint.pt" ]]; then
-        keep="$report_root/checkpoints/multi_5_20_weighted_seed${seed:-N}"
-        px_run mkdir -p "$keep"
-        px_run cp "$run/config.yaml" "$run/checkpoint.pt" "$run/checkpoint_before_perturbation.pt" "$keep/"
-      fi
-    done
-  fi
 
   # each family's own report: docs/results/<family>.md; the reading of the results, written by
   # hand, is kept across re-runs in notes_<family>.md
