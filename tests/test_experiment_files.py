@@ -43,8 +43,9 @@ def test_every_setup_has_both_families_and_nothing_else():
     assert names == expected
 
 
-#: The recipe on 5–20 cm with weighting less each improvement of docs/improvements.md §1–7, and
-#: the settings each one puts back to the paper's.
+#: The recipe on 5–20 cm with weighting less each improvement of docs/improvements.md §1–7 that
+#: it uses (§3, the warm-up of random starts, is the single positions'), and the settings each
+#: one puts back to the paper's.
 WITHOUT = {
     "step_sizes": {
         "policy.advantage_lr",
@@ -54,7 +55,6 @@ WITHOUT = {
         "policy.discount",
     },
     "state_difference": {"policy.feature_norm"},
-    "start_jitter": {"env.initial_pan_jitter_deg", "train.start_jitter_presentations"},
     "lm_weight_decay": {"distance.lm.weight_decay"},
     "eye_position": {"policy.eye_position_reference_m"},
     "reward_change": {"policy.reward_change_gain"},
@@ -73,13 +73,11 @@ def test_each_leave_one_out_file_puts_back_the_papers_settings_of_one_improvemen
         if key == "policy.feature_norm":
             # §1's bounded input stays: without §2 the state is θ centred and scaled to unit norm
             assert without[key] == "centred_unit"
-        elif key == "train.start_jitter_presentations":
-            assert without[key] is None
         else:
             assert without[key] == as_written[key], key
     text = (EXPERIMENTS / f"without_{improvement}.yaml").read_text()
     sections = {f"§{n}" for n in range(1, 8) if f"docs/improvements.md §{n}:" in text}
-    assert len(sections) == 1
+    assert len(sections) == 1 and sections != {"§3"}  # §3 is the single positions' only
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in EXPERIMENTS.glob("*.yaml")))
@@ -148,13 +146,26 @@ def test_plain_parallax_train_runs_the_recipe():
         assert plain[key] == recipe[key] == quickstart[key], key
 
 
+@pytest.mark.parametrize("setup", SETUPS)
+def test_only_the_recipes_single_positions_start_from_a_random_pan(setup):
+    """docs/improvements.md §3: a warm-up of random starts at a single lateral position; at
+    several positions every trial starts from pan 0, as in the paper."""
+    flat = _flat([f"experiment=recipe_{setup}"])
+    if setup.startswith("single"):
+        assert flat["env.initial_pan_jitter_deg"] == 2.0
+        assert flat["train.start_jitter_presentations"] == 100
+    else:
+        assert flat["env.initial_pan_jitter_deg"] == 0
+
+
 @pytest.mark.parametrize("run", sorted(p.name for p in CHECKPOINTS.glob("*_seed*")))
 def test_the_committed_models_are_reproduced_by_one_experiment_name(run):
-    """Each committed checkpoint's saved config is what `experiment=recipe_… seed=n` composes."""
+    """Each committed model's saved config is what `experiment=<name> seed=n` composes, for the
+    folder <name>_seed<n>."""
     saved_cfg = OmegaConf.load(CHECKPOINTS / run / "config.yaml")
     saved = flatten(OmegaConf.to_container(saved_cfg, resolve=True))
-    setup, seed = run.rsplit("_seed", 1)
-    current = _flat([f"experiment=recipe_{setup}", f"seed={seed}"])
+    name, seed = run.rsplit("_seed", 1)
+    current = _flat([f"experiment={name}", f"seed={seed}"])
     differ = {
         key: (saved.get(key), current.get(key))
         for key in set(saved) | set(current)

@@ -266,7 +266,7 @@ def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_fil
     for name in ("recipe_multi_5_20", "paper_multi_5_20", "without_lm_weight_decay"):
         assert f"experiment={name}\\," not in trained and f"\\,{name}\\," not in trained
         assert any(f"_replays/{name} " in l for l in replayed), name
-    assert "without_start_jitter" in trained and "recipe_multi_5_20_weighted" in trained
+    assert "without_reward_change" in trained and "recipe_multi_5_20_weighted" in trained
     # five seeds for the 5–20 cm headline rows, three elsewhere
     headline = [l for l in lines if l.startswith("parallax-train -m ") and "0\\,1\\,2\\,3\\,4" in l]
     assert len(headline) == 2 and all("multi_5_20_weighted seed=" in l for l in headline)

@@ -92,8 +92,9 @@ class EnvConfig:
     #: At each new lateral position: true turns the pan back to 0 (§3.2), false keeps it.
     pan_reset: bool = True
     #: Beyond the paper: each trial starts from a pan drawn uniformly in ±this many degrees
-    #: instead of 0, so the eye also learns from the far side of the target (0: the paper).
-    initial_pan_jitter_deg: float = 2.0
+    #: instead of 0, so the eye also learns from the far side of the target (0: the paper, and
+    #: the recipe at multiple lateral positions; the single-position files use 2).
+    initial_pan_jitter_deg: float = 0.0
     #: Largest pan increment the world accepts, degrees (A = {±0.2, ±0.1, ±0.05, 0}, §3.4).
     max_pan_increment_deg: float = 0.2
     stimuli: StimuliConfig = field(default_factory=StimuliConfig)

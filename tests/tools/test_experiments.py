@@ -13,7 +13,7 @@ def test_distance_only_variants_are_replays_of_the_trained_file():
         "recipe_multi_5_20",
         "without_lm_weight_decay",
         "without_best_readout",
-        "without_start_jitter",
+        "without_reward_change",
         "paper_multi_5_20",
         "paper_multi_5_20_weighted",
     ]
@@ -24,7 +24,7 @@ def test_distance_only_variants_are_replays_of_the_trained_file():
         "replay without_lm_weight_decay recipe_multi_5_20_weighted distance.lm.weight_decay=0.0",
         "replay without_best_readout recipe_multi_5_20_weighted train.distance_readout=last",
         # the eye's own settings differ: it must be trained
-        "train without_start_jitter",
+        "train without_reward_change",
         "train paper_multi_5_20",
         "replay paper_multi_5_20_weighted paper_multi_5_20 distance.weighting=true",
     ]

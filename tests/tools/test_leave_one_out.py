@@ -41,19 +41,19 @@ def test_each_row_is_paired_with_the_recipe_on_its_seeds(tmp_path):
     for seed, (eye, dist) in enumerate([(0.10, 1.0), (0.12, 1.4), (0.11, 1.2)]):
         _fake_run(tmp_path / "recipe" / f"s{seed}", RECIPE, seed, eye, dist)
     # removing the improvement makes the distance worse on two seeds of the two it has
-    _fake_run(tmp_path / "loo" / "a", "without_start_jitter", 0, 0.10, 1.5)
-    _fake_run(tmp_path / "loo" / "b", "without_start_jitter", 1, 0.11, 1.6)
+    _fake_run(tmp_path / "loo" / "a", "without_reward_change", 0, 0.10, 1.5)
+    _fake_run(tmp_path / "loo" / "b", "without_reward_change", 1, 0.11, 1.6)
     result = leave_one_out([tmp_path / "recipe", tmp_path / "loo"])
     rows = {r["experiment"]: r for r in result["rows"]}
     assert set(rows) == {RECIPE, *variants()}
     assert rows[RECIPE]["seeds"] == [0, 1, 2]
-    jitter = rows["without_start_jitter"]
-    assert jitter["seeds"] == [0, 1] and jitter["section"].startswith("§3 ")
-    assert jitter["distance_after"]["mean"] == pytest.approx(1.55)
-    assert jitter["distance_after_change"]["mean"] == pytest.approx(0.35)
-    assert jitter["distance_after_worse"] == [2, 2]
-    assert jitter["eye_before_change"]["mean"] == pytest.approx(-0.005)
-    assert jitter["eye_before_worse"] == [0, 2]
+    change = rows["without_reward_change"]
+    assert change["seeds"] == [0, 1] and change["section"].startswith("§6 ")
+    assert change["distance_after"]["mean"] == pytest.approx(1.55)
+    assert change["distance_after_change"]["mean"] == pytest.approx(0.35)
+    assert change["distance_after_worse"] == [2, 2]
+    assert change["eye_before_change"]["mean"] == pytest.approx(-0.005)
+    assert change["eye_before_worse"] == [0, 2]
     assert rows["without_step_sizes"]["seeds"] == []
     text = markdown(result)
     assert "(+0.35, worse on 2/2)" in text and "(−0.005, worse on 0/2)" in text
