@@ -137,6 +137,6 @@ def test_the_committed_runs_hold_every_setting_and_resume_under_their_experiment
     from parallax.config import changed_settings, load_run_config
 
     saved = load_run_config(CHECKPOINTS / run)  # refuses a config that lacks a setting
-    setup = run.rsplit("_seed", 1)[0]
-    current = compose([f"experiment=recipe_{setup}", f"seed={saved.seed}"])
+    experiment = run.rsplit("_seed", 1)[0]  # folders are named <experiment>_seed<n>
+    current = compose([f"experiment={experiment}", f"seed={saved.seed}"])
     assert changed_settings(saved, current) == []
