@@ -74,6 +74,11 @@ def test_three_columns_and_the_cells_worse_than_the_paper(tmp_path):
     assert sceptic[("held-out photographs, grid", "after")]["trials_per_seed"] == [71]
     assert sceptic[("held-out photographs, between", "after")]["total"]["mean"] == 1.3
     assert sceptic[("dead_leaves, grid", "after")]["total"]["mean"] == 2.5
+    # the leave-one-out report is linked only where it exists
+    assert "leave_one_out.md" not in text and "is not yet made" in text
+    (tmp_path / "leave_one_out.md").write_text("# leave one out\n")
+    text, _ = compare(tmp_path / "paper.json", tmp_path / "recipe.json")
+    assert "[leave_one_out.md](leave_one_out.md)" in text
 
 
 def test_a_report_without_the_paper_tables_is_one_line_and_exit_2(tmp_path, capsys):

@@ -250,6 +250,12 @@ def compare(paper_json: str | Path | None, ours_json: str | Path) -> tuple[str, 
     # the paper's algorithm as written, not run yet: an empty column
     as_written = _load(paper_json) if paper_json is not None else _NOT_RUN
     families = dict(zip(FAMILIES, (as_written, _load(ours_json)), strict=True))
+    # the leave-one-out report (launch/reproduce.sh without) sits beside the families' JSON
+    leave_one_out = (
+        "what each improvement buys is in [leave_one_out.md](leave_one_out.md)."
+        if (Path(ours_json).parent / "leave_one_out.md").exists()
+        else "what each improvement buys (`bash launch/reproduce.sh without`) is not yet made."
+    )
     md = [
         "# The paper, the paper's algorithm as written, and ours: Tables 2–5",
         "",
@@ -261,8 +267,7 @@ def compare(paper_json: str | Path | None, ours_json: str | Path) -> tuple[str, 
         "every run, its figures in the manner of Figs. 7–11 and its failed jobs, is the "
         f"Markdown beside its JSON ([{Path(paper_json or 'paper.json').stem}.md]"
         f"({Path(paper_json or 'paper.json').stem}.md), [{Path(ours_json).stem}.md]"
-        f"({Path(ours_json).stem}.md)); what each improvement buys is in "
-        "[leave_one_out.md](leave_one_out.md).",
+        f"({Path(ours_json).stem}.md)); {leave_one_out}",
         "",
     ]
     data: dict = {"inputs": [str(paper_json), str(ours_json)]}
