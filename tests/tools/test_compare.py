@@ -67,9 +67,11 @@ def test_three_columns_and_the_cells_worse_than_the_paper(tmp_path):
     # the paper as written is worse in every cell, ours in none
     worse = data["worse_than_paper"]
     assert worse and all(w.startswith("paper as written") for w in worse)
-    assert f"paper as written, {paper.WEIGHTING_5_20}, Total average: 9.00 % against 2.69 %" in (
-        "\n".join(worse)
+    assert (
+        f"paper as written, Table 4, {paper.WEIGHTING_5_20}, Total average: 9.00 % against "
+        "2.69 % (3.35×)" in "\n".join(worse)
     )
+    assert f"paper as written, Table 2, {paper.SINGLE} at 5 cm: 0.50° against 0.18°" in worse[0]
     sceptic = {(r["textures"], r["phase"]): r for r in data["sceptic"]}
     assert sceptic[("held-out photographs, grid", "after")]["trials_per_seed"] == [71]
     assert sceptic[("held-out photographs, between", "after")]["total"]["mean"] == 1.3

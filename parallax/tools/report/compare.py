@@ -74,8 +74,9 @@ def eye_table(families: dict[str, dict], key: str) -> tuple[str, dict, list[str]
                 cell[family] = stat.as_dict()
                 if published is not None and stat.n and round(stat.mean, 2) > published[0]:
                     worse.append(
-                        f"{family}, {column} at {position} cm: {stat.mean:.2f}° against "
-                        f"{published[0]:.2f}° (+{stat.mean - published[0]:.2f}°)"
+                        f"{family}, Table {key[-1]}, {column} at {position} cm: "
+                        f"{stat.mean:.2f}° against {published[0]:.2f}° "
+                        f"(+{stat.mean - published[0]:.2f}°)"
                     )
             data.setdefault(column, {})[position] = cell
         rows.append(row)
@@ -103,9 +104,9 @@ def distance_table(families: dict[str, dict], key: str) -> tuple[str, dict, list
                 cell[family] = stat.as_dict()
                 if stat.n and round(stat.mean, 2) > published[r]:
                     worse.append(
-                        f"{family}, {row_name}, {paper.DISTANCE_RANGE_TITLES[r]}: "
+                        f"{family}, Table {key[-1]}, {row_name}, {paper.DISTANCE_RANGE_TITLES[r]}: "
                         f"{stat.mean:.2f} % against {published[r]:.2f} % "
-                        f"({stat.mean / published[r]:.1f}×)"
+                        f"({stat.mean / published[r]:.2f}×)"
                     )
             data[row_name][r] = cell
         rows.append(row)
@@ -260,7 +261,8 @@ def compare(paper_json: str | Path | None, ours_json: str | Path) -> tuple[str, 
         "# The paper, the paper's algorithm as written, and ours: Tables 2–5",
         "",
         "Made by `python -m parallax.tools.report.compare` from "
-        f"`{paper_json}` (the paper's algorithm as written, `experiment=paper_<setup>`) and "
+        f"{f'`{paper_json}`' if paper_json else 'nothing yet'} (the paper's algorithm as "
+        "written, `experiment=paper_<setup>`) and "
         f"`{ours_json}` (our recipe, `experiment=recipe_<setup>`), which `parallax-report` "
         "wrote from the runs of `bash launch/reproduce.sh`. Cells: mean ± sd over seeds (n "
         "seeds); the paper's published number beside them. Each family's own report, with "
