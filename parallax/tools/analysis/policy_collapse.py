@@ -20,9 +20,13 @@ from pathlib import Path
 from parallax.config import load_run_config
 from parallax.tools.report.runs import read_metrics
 
+#: The thresholds' defaults: a fraction of the projection's radius, an entropy (nats), and the
+#: presentations in which to look for the best early pursuit.
+BALL, ENTROPY, EARLY = 0.99, 0.01, 300
+
 
 def collapse(
-    run_dir: str | Path, *, ball: float = 0.99, entropy: float = 0.01, early: int = 300
+    run_dir: str | Path, *, ball: float = BALL, entropy: float = ENTROPY, early: int = EARLY
 ) -> dict:
     """{"radius", "ball_at", "entropy_at", "early_best" (mae, presentation), "last" (min, max
     of the per-position recent MAE before the perturbation)}; None where a threshold was never
@@ -68,9 +72,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         prog="python -m parallax.tools.analysis.policy_collapse", description=__doc__.split("\n")[0]
     )
     parser.add_argument("runs", nargs="+", help="run directories (with metrics.jsonl)")
-    parser.add_argument("--ball", type=float, default=0.99, help="fraction of the radius")
-    parser.add_argument("--entropy", type=float, default=0.01, help="entropy threshold (nats)")
-    parser.add_argument("--early", type=int, default=300, help="presentations for the early MAE")
+    parser.add_argument("--ball", type=float, default=BALL, help="fraction of the radius")
+    parser.add_argument("--entropy", type=float, default=ENTROPY, help="entropy threshold (nats)")
+    parser.add_argument("--early", type=int, default=EARLY, help="presentations for the early MAE")
     args = parser.parse_args(argv)
     if not 0 < args.ball <= 1:
         parser.exit(2, f"{parser.prog}: error: --ball must be in (0, 1], got {args.ball}\n")
