@@ -53,6 +53,9 @@ class Presentation:
     # beyond the paper (§7): the positions of L a robot chose to visit, in order (indices into
     # L; the other positions' pans are NaN); None when it swept the whole list
     route: list[int] | None = None
+    # seconds the loop's thread spent waiting in the lockstep (parallax.lockstep.WAITS): for
+    # frames, for the dictionary step, encoding; the rest of its time is the policy's turn
+    waits: dict[str, float] = field(default_factory=dict)
 
     @property
     def labels(self) -> list[str]:
@@ -326,7 +329,9 @@ class Experiment:
                 increments = self.policy.action_values[action].cpu().numpy()
                 previous = _Step(state, action, rewards, increments)
                 obs, out, last = world.step(increments)
-        return tally.presentation(obs, keep_view)
+        presentation = tally.presentation(obs, keep_view)
+        presentation.waits = dict(world.seconds)  # the last dictionary step's wait included
+        return presentation
 
     # --- state -----------------------------------------------------------------------------
     def state_dict(self) -> dict:

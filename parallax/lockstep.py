@@ -15,6 +15,11 @@ and calls a :class:`Lockstep` for the parts that run on other threads:
   render; :meth:`Lockstep.step` waits for it before it encodes again, and leaving the ``with``
   block waits for the last one — also when an error leaves it, so no step runs on behind it.
 
+:attr:`Lockstep.seconds` adds up where the calling thread spent its time in the lockstep: waiting
+for the frames, waiting for the dictionary step, and encoding (its own scale, and waiting for the
+helper's); what the caller does between the calls (the policy's turn) is the rest of its time.
+``parallax-bench`` prints it per robot-iteration, to show which part holds a step up.
+
 Every value is computed as in the plain sequence, in the same order per robot and per dictionary
 (``tests/test_experiment.py`` runs that sequence beside it), so the results do not depend on the
 schedule — with one torch thread (``train.threads=1``, the default): with more, the matrix
@@ -23,6 +28,7 @@ library may split a product of a chunk's rows otherwise than one of all rows.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from concurrent.futures import Future, wait
 from typing import Any, NamedTuple
@@ -36,6 +42,9 @@ from parallax.coding import CoderOutput, Encoding, MultiScaleCoder
 #: Robots whose frames are encoded in one call (the last chunk may be smaller): a small chunk
 #: starts encoding sooner after the first frames arrive, a large one makes fewer calls.
 ENCODE_CHUNK = 4
+
+#: What :attr:`Lockstep.seconds` adds up, in this order.
+WAITS = ("frames", "dictionary_step", "encoding")
 
 
 class Frames(NamedTuple):
@@ -62,6 +71,8 @@ class Lockstep:
         # the last frames' encodings, chunk by chunk, for their dictionary step
         self._encodings: list[Encoding] = []
         self._learning: Future | None = None  # a dictionary step running on the helper thread
+        #: the calling thread's seconds in each of :data:`WAITS` so far
+        self.seconds = dict.fromkeys(WAITS, 0.0)
 
     def __enter__(self) -> Lockstep:
         return self
@@ -100,17 +111,23 @@ class Lockstep:
         """Wait for the running dictionary step, if any, and raise its error, if any."""
         learning, self._learning = self._learning, None
         if learning is not None:
+            started = time.perf_counter()
             learning.result()
+            self.seconds["dictionary_step"] += time.perf_counter() - started
 
     def _encode_as_they_arrive(self, futures: list[Future]) -> Frames:
         timesteps: list[Any] = []
         self._encodings = []
         for first in range(0, len(futures), ENCODE_CHUNK):
             robots = slice(first, min(first + ENCODE_CHUNK, len(futures)))
+            started = time.perf_counter()
             arrived = [future.result() for future in futures[robots]]
+            encoding = time.perf_counter()
             timesteps += arrived
             images = stack_images([ts.observation for ts in arrived], "image", self.coder.device)
             self._encodings.append(self.coder.encode(images, robots))
+            self.seconds["frames"] += encoding - started
+            self.seconds["encoding"] += time.perf_counter() - encoding
         return Frames(
             observations=[ts.observation for ts in timesteps],
             output=CoderOutput.join([encoding.output for encoding in self._encodings]),

@@ -130,6 +130,10 @@ def test_the_lockstep_gives_the_numbers_of_the_plain_loop(
             pans, reward = _plain_presentation(plain)
             np.testing.assert_array_equal(presentation.pans, pans)
             assert presentation.reward == reward
+            # the loop's thread accounts for its waits in the lockstep, not for the plain loop
+            assert list(presentation.waits) == list(lockstep.WAITS)
+            assert all(seconds >= 0 for seconds in presentation.waits.values())
+            assert presentation.waits["encoding"] > 0
         assert len(set(pans.ravel().tolist())) > 1  # the robots moved
         _assert_same_states(scheduled.coder.state_dict(), plain.coder.state_dict())
         _assert_same_states(scheduled.policy.state_dict(), plain.policy.state_dict())

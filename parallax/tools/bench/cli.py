@@ -83,7 +83,14 @@ def end_to_end(
             trainer.step_presentation(keep_view=False)  # warm-up: first calls allocate and compile
             trainers[b] = trainer
         samples = {
-            b: {"rates": [], "step_ms": [], "trainer_rates": [], "cpu_ms": [], "by_thread": []}
+            b: {
+                "rates": [],
+                "step_ms": [],
+                "trainer_rates": [],
+                "cpu_ms": [],
+                "by_thread": [],
+                "loop": [],
+            }
             for b in robots
         }
         for _ in range(presentations):
@@ -100,6 +107,11 @@ def end_to_end(
                 timed["by_thread"].append(
                     {role: s / (pres.steps * b) * 1e3 for role, s in threads.items()}
                 )
+                # the loop's own thread, per lockstep iteration: its waits, and the rest of its
+                # time (the policy's turn and the bookkeeping)
+                loop = {wait: s / pres.steps * 1e3 for wait, s in pres.waits.items()}
+                loop["policy_and_rest"] = dt / pres.steps * 1e3 - sum(loop.values())
+                timed["loop"].append(loop)
                 t = time.perf_counter()
                 pres, _ = trainer.step_presentation(keep_view=False)
                 timed["trainer_rates"].append(pres.steps * b / (time.perf_counter() - t))
@@ -124,6 +136,11 @@ def end_to_end(
             "cpu_ms_per_robot_iteration_by_thread": {
                 role: statistics.median(p.get(role, 0.0) for p in timed["by_thread"])
                 for role in dict.fromkeys(r for p in timed["by_thread"] for r in p)
+            },
+            # where the loop's thread spent a lockstep iteration (parallax.lockstep.WAITS and the
+            # rest), ms
+            "loop_thread_ms_per_lockstep": {
+                part: statistics.median(p[part] for p in timed["loop"]) for part in timed["loop"][0]
             },
         }
     return results
@@ -257,6 +274,12 @@ def format_report(report: dict) -> str:
             if by_thread:
                 spent = ", ".join(f"{role} {ms:.2f}" for role, ms in by_thread.items())
                 lines.append(f"  {dev} {b:<6} CPU per robot-iteration by thread, ms: {spent}")
+            loop = r.get("loop_thread_ms_per_lockstep")
+            if loop:
+                spent = ", ".join(f"{part.replace('_', ' ')} {ms:.2f}" for part, ms in loop.items())
+                lines.append(
+                    f"  {dev} {b:<6} the loop's thread per lockstep iteration, ms: {spent}"
+                )
     for dev, rf in report["roofline"].items():
         lockstep = (
             f"; a lockstep of 16 robots {rf['coder_bound_ms_B16']:.3f} ms "
