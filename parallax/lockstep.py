@@ -15,10 +15,11 @@ and calls a :class:`Lockstep` for the parts that run on other threads:
   render; :meth:`Lockstep.step` waits for it before it encodes again, and leaving the ``with``
   block waits for the last one — also when an error leaves it, so no step runs on behind it.
 
-:attr:`Lockstep.seconds` adds up where the calling thread spent its time in the lockstep: waiting
-for the frames, waiting for the dictionary step, and encoding (its own scale, and waiting for the
-helper's); what the caller does between the calls (the policy's turn) is the rest of its time.
-``parallax-bench`` prints it per robot-iteration, to show which part holds a step up.
+:attr:`Lockstep.seconds` adds up where the calling thread spent its time in the lockstep:
+waiting for the frames it encodes, waiting for the dictionary step, and encoding (its own scale,
+and waiting for the helper's); the rest of its time is what the caller does between the calls
+(the policy's turn) and a presentation's start (its worlds' resets and the references' patches).
+``parallax-bench`` prints it per lockstep iteration, to show which part holds a step up.
 
 Every value is computed as in the plain sequence, in the same order per robot and per dictionary
 (``tests/test_experiment.py`` runs that sequence beside it), so the results do not depend on the
@@ -29,8 +30,9 @@ library may split a product of a chunk's rows otherwise than one of all rows.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, wait
+from contextlib import contextmanager
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -111,23 +113,31 @@ class Lockstep:
         """Wait for the running dictionary step, if any, and raise its error, if any."""
         learning, self._learning = self._learning, None
         if learning is not None:
-            started = time.perf_counter()
-            learning.result()
-            self.seconds["dictionary_step"] += time.perf_counter() - started
+            with self._timed("dictionary_step"):
+                learning.result()
+
+    @contextmanager
+    def _timed(self, wait: str) -> Iterator[None]:
+        """Adds the seconds the block takes to :attr:`seconds` [``wait``]."""
+        started = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[wait] += time.perf_counter() - started
 
     def _encode_as_they_arrive(self, futures: list[Future]) -> Frames:
         timesteps: list[Any] = []
         self._encodings = []
         for first in range(0, len(futures), ENCODE_CHUNK):
             robots = slice(first, min(first + ENCODE_CHUNK, len(futures)))
-            started = time.perf_counter()
-            arrived = [future.result() for future in futures[robots]]
-            encoding = time.perf_counter()
+            with self._timed("frames"):
+                arrived = [future.result() for future in futures[robots]]
             timesteps += arrived
-            images = stack_images([ts.observation for ts in arrived], "image", self.coder.device)
-            self._encodings.append(self.coder.encode(images, robots))
-            self.seconds["frames"] += encoding - started
-            self.seconds["encoding"] += time.perf_counter() - encoding
+            with self._timed("encoding"):
+                images = stack_images(
+                    [ts.observation for ts in arrived], "image", self.coder.device
+                )
+                self._encodings.append(self.coder.encode(images, robots))
         return Frames(
             observations=[ts.observation for ts in timesteps],
             output=CoderOutput.join([encoding.output for encoding in self._encodings]),

@@ -78,11 +78,11 @@ def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
     assert by_thread["main"] > 0 and by_thread["GL thread"] > 0
     assert sum(by_thread.values()) == pytest.approx(one["cpu_ms_per_robot_iteration"], rel=0.25)
     assert "CPU per robot-iteration by thread" in printed
-    # where the loop's thread spent a lockstep iteration: its waits and the rest add up to it
+    # where the loop's thread spent a lockstep iteration: the rest is what its waits leave of
+    # the iteration, so it is positive only if the waits were not counted twice
     loop = one["loop_thread_ms_per_lockstep"]
     assert list(loop) == ["frames", "dictionary_step", "encoding", "policy_and_rest"]
     assert loop["encoding"] > 0 and loop["policy_and_rest"] > 0
-    assert sum(loop.values()) == pytest.approx(one["lockstep_ms"])
     assert "the loop's thread per lockstep iteration" in printed
     ceiling = report["ceiling"]["cpu"]
     assert ceiling["render_cpu_ms_per_frame"] > 0
