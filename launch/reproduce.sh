@@ -247,6 +247,20 @@ for family in "${families[@]}"; do
   fi
 done
 
+# the eye's share of the recipe's 5–20 cm distance error, which notes.md reads (eye_bound.json)
+mapfile -t headline_runs < <(px_runs_with "$(px_record_dir recipe)" experiment=recipe_multi_5_20_weighted)
+eval_dirs=()
+for run in "${headline_runs[@]}"; do
+  [[ -f "$run/eval_before/eval.json" ]] && eval_dirs+=("$run/eval_before")
+done
+for run in "${headline_runs[@]}"; do
+  [[ -f "$run/eval.json" ]] && eval_dirs+=("$run")
+done
+if (( ${#eval_dirs[@]} )); then
+  px_run python -m parallax.tools.analysis.eye_bound "${eval_dirs[@]}" \
+    --json "$report_root/eye_bound.json" || status=$?
+fi
+
 # the three columns: the paper's numbers, the paper's algorithm in parallax, ours
 if [[ -f "$report_root/paper.json" && -f "$report_root/recipe.json" ]] || [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
   notes=()

@@ -63,3 +63,26 @@ def test_a_folder_without_an_eval_is_one_line_and_exit_2(tmp_path, capsys):
     assert exit_.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no eval.json" in err[0]
+
+
+def test_the_worst_presentation_is_the_networks_largest_error_with_the_eyes_largest_miss(
+    tmp_path,
+):
+    worst = 5  # the eye stops 0.8° short at the second lateral position of this presentation
+
+    def stops_short(perfect):
+        pans = perfect.copy()
+        pans[worst, 1] -= 0.8
+        return pans
+
+    run = _eval_dir(tmp_path, stops_short)
+    result = json.loads((run / "eval.json").read_text())
+    errors = np.full(len(DISTANCES), 1.0)
+    errors[worst] = 50.0
+    result["distance"]["per_distance"] = {f"{d:.2f}": e for d, e in zip(DISTANCES, errors)}
+    (run / "eval.json").write_text(json.dumps(result))
+    row = eye_bound.eye_bound(run)
+    laterals = compose(TINY).curriculum.lateral_positions
+    assert row["worst_distance_m"] == DISTANCES[worst] and row["worst_error"] == 50.0
+    assert row["worst_eye_miss_deg"] == pytest.approx(0.8)
+    assert row["worst_eye_miss_at_cm"] == pytest.approx(laterals[1] * 100)

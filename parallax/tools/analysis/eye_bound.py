@@ -16,7 +16,9 @@ the action set itself.
     python -m parallax.tools.analysis.eye_bound EVAL_DIR…   # folders holding an eval.json
 
 For each evaluation it prints the network's distance error (parallax-eval's), the two learners'
-fitted to the evaluation's own eye movements, and the action grid's floor.
+fitted to the evaluation's own eye movements, the action grid's floor, and the network's worst
+presentation: its distance, its error there, and how far the eye ended from α* at the lateral
+position where it missed most (one presentation whose eye stops short can carry a model's mean).
 """
 
 from __future__ import annotations
@@ -114,6 +116,7 @@ def eye_bound(eval_dir: str | Path) -> dict:
     perfect = perfect_pans(laterals, tuple(float(d) for d in distances))
     rounded = np.round(perfect / step) * step
     network = result.get("distance", {}).get("by_range", {}).get("total", math.nan)
+    worst = worst_presentation(result, pans, distances, perfect, laterals)
 
     def error(estimates: np.ndarray) -> float:
         return distance_error_by_range(estimates, distances)["total"]
@@ -127,6 +130,30 @@ def eye_bound(eval_dir: str | Path) -> dict:
         "lines_on_this_eye": error(leave_one_out(pans, distances)),
         "action_grid_step_deg": step,
         "floor": error(leave_one_out(rounded, distances)),
+        **worst,
+    }
+
+
+def worst_presentation(result: dict, pans, distances, perfect, laterals) -> dict:
+    """The grid presentation the network judged worst (parallax-eval's error per distance), and
+    the eye's largest miss |q_p − α*_p| there (degrees) with its lateral position (cm)."""
+    per_distance = result.get("distance", {}).get("per_distance", {})
+    if not per_distance:
+        return {
+            "worst_distance_m": math.nan,
+            "worst_error": math.nan,
+            "worst_eye_miss_deg": math.nan,
+            "worst_eye_miss_at_cm": math.nan,
+        }
+    errors = np.array([per_distance[f"{d:.2f}"] for d in distances])
+    row = int(np.argmax(errors))
+    misses = np.abs(pans[row] - perfect[row])
+    column = int(np.argmax(misses))
+    return {
+        "worst_distance_m": float(distances[row]),
+        "worst_error": float(errors[row]),
+        "worst_eye_miss_deg": float(misses[column]),
+        "worst_eye_miss_at_cm": round(laterals[column] * 100, 6),
     }
 
 
@@ -144,14 +171,16 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(2)
     print(
         "| evaluation | trials | network as trained (%) | network fitted to this eye (%) | "
-        "lines fitted to this eye (%) | action grid floor (%) |"
+        "lines fitted to this eye (%) | action grid floor (%) | worst presentation: distance, "
+        "network's error, the eye's largest miss |"
     )
-    print("|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|")
     for row in rows:
         print(
             f"| {row['eval']} | {row['trials']} | {row['network']:.2f} | "
             f"{row['network_on_this_eye']:.2f} | {row['lines_on_this_eye']:.2f} | "
-            f"{row['floor']:.2f} |"
+            f"{row['floor']:.2f} | {row['worst_distance_m']:.2f} m, {row['worst_error']:.1f} %, "
+            f"{row['worst_eye_miss_deg']:.2f}° at {row['worst_eye_miss_at_cm']:g} cm |"
         )
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
