@@ -135,8 +135,10 @@ def eye_bound(eval_dir: str | Path) -> dict:
 
 
 def worst_presentation(result: dict, pans, distances, perfect, laterals) -> dict:
-    """The grid presentation the network judged worst (parallax-eval's error per distance), and
-    the eye's largest miss |q_p − α*_p| there (degrees) with its lateral position (cm)."""
+    """The grid distance the network judged worst (parallax-eval's error there, the mean over its
+    textures) and the eye's largest miss |q_p − α*_p| (degrees) on the first presentation at that
+    distance, with its lateral position (cm). parallax-eval shows one texture per distance
+    unless told otherwise, so the presentation is then the worst one."""
     per_distance = result.get("distance", {}).get("per_distance", {})
     if not per_distance:
         return {
