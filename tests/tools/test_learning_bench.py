@@ -33,6 +33,7 @@ def test_cases_stop_when_the_eye_has_learnt_or_the_budget_is_spent() -> None:
         assert case["presentations"] == 4 // case["robots"]
         assert case["robot_iterations"] == 8 * case["presentations"] * case["robots"] == 32
     assert learnt["medians"]["B=2"]["robot_iterations_ratio"] == 1.0
+    assert learnt["device"] == "cpu" and isinstance(learnt["device_name"], str)
     spent = learning.run([2], [0, 1], 0.001, 40, SMALL, progress=False)
     assert [c["learnt"] for c in spent["cases"]] == [False, False]
     assert all(c["robot_iterations"] == 48 for c in spent["cases"])  # 3 presentations ≥ 40

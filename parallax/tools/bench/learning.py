@@ -30,6 +30,7 @@ import contextlib
 import json
 import math
 import os
+import platform
 import statistics
 import sys
 import tempfile
@@ -135,8 +136,12 @@ def run(
                     refresh=False,
                 )
         bar.close()
+    device = cases[0].trainer.exp.device if cases else torch.device("cpu")
     report: dict = {
         "overrides": list(overrides),
+        # what the cases ran on, so that a saved report says which machine it measured
+        "device": str(device),
+        "device_name": machine_name(device),
         "threshold_deg": threshold,
         "budget_robot_iterations": budget,
         "load_average_before": load_before,
@@ -158,6 +163,19 @@ def run(
     }
     report["medians"] = medians(report["cases"], robots)
     return report
+
+
+def machine_name(device: torch.device) -> str:
+    """The GPU's name for a CUDA device, else the CPU's model name (Linux; else the platform's
+    processor string, which may be empty)."""
+    if device.type == "cuda":
+        return torch.cuda.get_device_name(device)
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.exists():
+        for line in cpuinfo.read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.processor()
 
 
 def medians(cases: list[dict], robots: Sequence[int]) -> dict:
@@ -185,7 +203,8 @@ def medians(cases: list[dict], robots: Sequence[int]) -> dict:
 def format_report(report: dict) -> str:
     lines = [
         f"time to learn: eye-movement MAE ≤ {report['threshold_deg']:g}° at every position "
-        f"({' '.join(report['overrides'])}); medians over seeds",
+        f"({' '.join(report['overrides'])}); medians over seeds"
+        + (f"; on {report['device_name']}" if report.get("device_name") else ""),
         f"{'':6} {'learnt':>7} {'robot-iterations':>17} {'ratio':>6} {'wall s':>8} {'ratio':>6} "
         f"{'robot-it/s':>10}",
     ]
