@@ -8,7 +8,8 @@ and calls a :class:`Lockstep` for the parts that run on other threads:
 
 * the worlds reset and step on the GL thread (:func:`parallax.envs.gl_thread`, MuJoCo renders
   without the GIL) while this thread encodes: the robots' frames are encoded chunk by chunk, in
-  robot order, each chunk as soon as its frames are there (:data:`ENCODE_CHUNK` robots at a time);
+  robot order, each chunk as soon as its frames are there (:func:`encode_chunk`: 4 robots at a
+  time on the CPU, all of them in one call on a GPU);
 * the dictionary step of an iteration runs on the coder's helper thread from
   :meth:`Lockstep.start_dictionary_step` on, while the policy learns and acts (a turn in which
   only this thread would work: the world waits for the actions) and while the next frames
@@ -41,9 +42,18 @@ import torch
 import parallax.envs
 from parallax.coding import CoderOutput, Encoding, MultiScaleCoder
 
-#: Robots whose frames are encoded in one call (the last chunk may be smaller): a small chunk
-#: starts encoding sooner after the first frames arrive, a large one makes fewer calls.
+#: Robots whose frames are encoded in one call on the CPU (the last chunk may be smaller): a small
+#: chunk starts encoding sooner after the first frames arrive, a large one makes fewer calls.
 ENCODE_CHUNK = 4
+
+
+def encode_chunk(device: torch.device, robots: int) -> int:
+    """How many robots' frames one encoding call takes: :data:`ENCODE_CHUNK` on the CPU, where
+    encoding the first frames while the rest render keeps both cores busy; all of them elsewhere:
+    on a GPU a call's time is mostly its kernel launches, much the same for 4 robots as for 64, so
+    chunks of 4 would make the encoding nearly B/4 times as long (docs/performance.md)."""
+    return ENCODE_CHUNK if device.type == "cpu" else max(robots, 1)
+
 
 #: What :attr:`Lockstep.seconds` adds up, in this order.
 WAITS = ("frames", "dictionary_step", "encoding")
@@ -128,8 +138,9 @@ class Lockstep:
     def _encode_as_they_arrive(self, futures: list[Future]) -> Frames:
         timesteps: list[Any] = []
         self._encodings = []
-        for first in range(0, len(futures), ENCODE_CHUNK):
-            robots = slice(first, min(first + ENCODE_CHUNK, len(futures)))
+        chunk = encode_chunk(self.coder.device, len(futures))
+        for first in range(0, len(futures), chunk):
+            robots = slice(first, min(first + chunk, len(futures)))
             with self._timed("frames"):
                 arrived = [future.result() for future in futures[robots]]
             timesteps += arrived

@@ -245,3 +245,46 @@ def test_an_error_on_the_gl_thread_reaches_the_caller() -> None:
     with pytest.raises(ValueError, match="from the GL thread"):
         parallax.envs.gl_thread().call(fail)
     assert parallax.envs.gl_thread().call(lambda: 7) == 7  # and it goes on serving
+
+
+class _TimeStep:
+    def __init__(self, image: np.ndarray) -> None:
+        self.observation = {"image": image}
+
+    def last(self) -> bool:
+        return False
+
+
+class _RecordingCoder:
+    """Stands in for the coder on a device of the given type; records the robots of each call."""
+
+    def __init__(self, device: str) -> None:
+        self.device = torch.device(device)
+        self.calls: list[tuple[int, int]] = []
+
+    def encode(self, images, robots):
+        from parallax.coding import CoderOutput, Encoding
+
+        self.calls.append((robots.start, robots.stop))
+        count = images.shape[0]
+        output = CoderOutput(state=torch.zeros(count, 2), reward=torch.zeros(count), errors={})
+        return Encoding(output=output, codes={})
+
+
+@pytest.mark.parametrize(("device", "calls"), [("cpu", 4), ("meta", 1)])
+def test_frames_are_encoded_in_chunks_on_the_cpu_and_in_one_call_on_a_gpu(device, calls) -> None:
+    # on a GPU a call costs its kernel launches whatever it holds, so one call takes all B robots
+    # (the meta device stands in for a GPU: the frames are stacked there, nothing is computed)
+    from concurrent.futures import Future
+
+    robots = 4 * lockstep.ENCODE_CHUNK
+    futures = []
+    for _ in range(robots):
+        future: Future = Future()
+        future.set_result(_TimeStep(np.zeros((8, 8, 3), dtype=np.uint8)))
+        futures.append(future)
+    coder = _RecordingCoder(device)
+    frames = lockstep.Lockstep([], coder)._encode_as_they_arrive(futures)
+    assert len(coder.calls) == calls
+    assert coder.calls[0][0] == 0 and coder.calls[-1][1] == robots
+    assert frames.output.state.shape == (robots, 2)
