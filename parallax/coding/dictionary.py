@@ -101,6 +101,33 @@ def gradient_step_(
     normalise_atoms_(dictionary)
 
 
+def gradient_step_and_gram_(
+    dictionary: torch.Tensor,
+    code: SparseCode | Sequence[SparseCode],
+    learning_rate: float,
+    kernel: str | None = None,
+    images: int = 1,
+) -> torch.Tensor | None:
+    """:func:`gradient_step_`, then the Gram matrix Φ·Φᵀ of the new dictionary, returned, in one
+    call of the compiled kernels, the same numbers: the GIL stays released throughout, so a
+    thread that runs meanwhile (the policy's, in a lockstep) never waits for it. None, with
+    nothing done, where the kernels do not apply (another device, ``kernel`` "torch", no
+    patches)."""
+    chunks = [code] if isinstance(code, SparseCode) else list(code)
+    patches = sum(chunk.residuals.shape[0] for chunk in chunks)
+    compiled = native.kernels_for(kernel, dictionary)
+    if compiled is None or patches == 0 or not dictionary.is_contiguous():
+        return None
+    return compiled.dictionary_step(
+        dictionary,
+        [chunk.atom_indices for chunk in chunks],
+        [chunk.coefficients for chunk in chunks],
+        [chunk.residuals for chunk in chunks],
+        learning_rate * images / patches,
+        _MIN_ATOM_NORM,
+    )
+
+
 def pooled_activity(codes: torch.Tensor) -> torch.Tensor:
     """θ (eqs. 2–3): (B, P, N) codes → (B, N) mean squared coefficient of every atom."""
     return codes.square().mean(dim=1)

@@ -1,14 +1,16 @@
 """The compiled CPU kernels of the sparse coder (``pursuit_kernel.cpp``, paper §3.3, eq. 1).
 
-Five functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch by patch),
+Six functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch by patch),
 ``codes_and_residuals`` (dense codes and residuals from the picks), ``residuals_only``,
 ``pooled_activity`` (θ from the picks, summed in torch's order, without the dense codes; checked
-per shape by :func:`parallax.coding.dictionary.exact_pooled_activity_kernel`) and
-``codes_times_residuals`` (the dictionary gradient's Bᵀ·R). :func:`load_kernels` builds the C++
-file on first use with ``torch.utils.cpp_extension.load`` (-O3; needs a C++ compiler and the
-``ninja`` package; torch caches the build under ``~/.cache/torch_extensions`` or
-``$TORCH_EXTENSIONS_DIR``, so later processes only load it), then checks once that all of them
-reproduce the numpy/torch code of :mod:`parallax.coding.reference` bit for bit on random data.
+per shape by :func:`parallax.coding.dictionary.exact_pooled_activity_kernel`),
+``codes_times_residuals`` (the dictionary gradient's Bᵀ·R) and ``dictionary_step`` (the whole
+dictionary step and the next Gram matrix in one call, which keeps the GIL released throughout).
+:func:`load_kernels` builds the C++ file on first use with ``torch.utils.cpp_extension.load``
+(-O3; needs a C++ compiler and the ``ninja`` package; torch caches the build under
+``~/.cache/torch_extensions`` or ``$TORCH_EXTENSIONS_DIR``, so later processes only load it),
+then checks once that all of them reproduce the numpy/torch code of
+:mod:`parallax.coding.reference` bit for bit on random data.
 It returns the module, or ``None`` — with one warning line saying why — when the kernels cannot
 be built or disagree.
 
@@ -145,11 +147,26 @@ def _self_check(module: ModuleType) -> None:
                     module.codes_times_residuals(picks, coefficients, residuals, atoms),
                     reference.codes_times_residuals(picks, coefficients, residuals, atoms),
                 ),
+                *_dictionary_step_pairs(module, dictionary, picks, coefficients, codes, residuals),
             ):
                 if not torch.equal(mine, theirs):
                     raise RuntimeError(
                         f"its {dtype} {name} differ from the numpy/torch code's on this machine"
                     )
+
+
+def _dictionary_step_pairs(module, dictionary, picks, coefficients, codes, residuals) -> list:
+    """(name, the kernel's, the numpy/torch code's) for the one-call dictionary step and its
+    Gram matrix."""
+    from .dictionary import _MIN_ATOM_NORM, gradient_step_
+    from .pursuit import SparseCode, gram_matrix
+
+    expected, stepped = dictionary.clone(), dictionary.clone()
+    gradient_step_(expected, SparseCode(picks, coefficients, codes, residuals), 0.1, "torch")
+    gram = module.dictionary_step(
+        stepped, [picks], [coefficients], [residuals], 0.1 / residuals.shape[0], _MIN_ATOM_NORM
+    )
+    return [("dictionary step", stepped, expected), ("Gram matrix", gram, gram_matrix(expected))]
 
 
 def load_kernels() -> ModuleType | None:

@@ -30,6 +30,8 @@
 #include <ATen/Parallel.h>
 #include <ATen/core/Tensor.h>
 #include <ATen/ops/empty.h>
+#include <ATen/ops/linalg_vector_norm.h>
+#include <ATen/ops/matmul.h>
 #include <ATen/ops/zeros.h>
 #include <torch/csrc/utils/pybind.h>
 
@@ -369,6 +371,33 @@ at::Tensor codes_times_residuals(const at::Tensor& picks, const at::Tensor& coef
   return product;
 }
 
+// One dictionary step and the next Gram matrix in one call, so that the GIL stays released from
+// start to end (a step of separate Python calls takes it back between them, and then the thread
+// that runs the policy meanwhile waits for it at each of its own calls): Bᵀ·R of the chunks'
+// picks and residuals, chunk after chunk; Φ += alpha·Bᵀ·R; every atom divided by max(‖φ‖,
+// min_norm); and Φ·Φᵀ, returned. The same ATen operations in the same order as
+// parallax.coding.dictionary.gradient_step_ followed by parallax.coding.pursuit.gram_matrix.
+at::Tensor dictionary_step(at::Tensor dictionary, const std::vector<at::Tensor>& picks,
+                           const std::vector<at::Tensor>& coefficients,
+                           const std::vector<at::Tensor>& residuals, double alpha,
+                           double min_norm) {
+  check_cpu_contiguous(dictionary, "dictionary");
+  TORCH_CHECK(dictionary.dim() == 2, "dictionary must be (N, K)");
+  TORCH_CHECK(!picks.empty() && picks.size() == coefficients.size() &&
+                  picks.size() == residuals.size(),
+              "picks, coefficients and residuals must be lists of the same chunks, at least one");
+  c10::optional<at::Tensor> product;
+  for (size_t chunk = 0; chunk < picks.size(); ++chunk) {
+    product = codes_times_residuals(picks[chunk].contiguous(), coefficients[chunk].contiguous(),
+                                    residuals[chunk].contiguous(), dictionary.size(0), product);
+  }
+  TORCH_CHECK(product->size(1) == dictionary.size(1), "residuals and dictionary disagree on K");
+  dictionary.add_(*product, alpha);
+  dictionary.div_(at::linalg_vector_norm(dictionary, 2, at::IntArrayRef{1}, true, c10::nullopt)
+                      .clamp_min_(min_norm));
+  return at::matmul(dictionary, dictionary.t());
+}
+
 }  // namespace
 
 // The GIL is released while they run: they touch tensors only, and the world renders the next
@@ -389,4 +418,9 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
         "the dictionary gradient's B^T R, (N, K), from the picks and the residuals; added to "
         "out when given", py::arg("picks"), py::arg("coefficients"), py::arg("residuals"),
         py::arg("n_atoms"), py::arg("out") = py::none(), release_gil());
+  m.def("dictionary_step", &dictionary_step,
+        "one dictionary step in place (B^T R of the chunks, the step, unit-norm atoms) and the "
+        "next Gram matrix, returned", py::arg("dictionary"), py::arg("picks"),
+        py::arg("coefficients"), py::arg("residuals"), py::arg("alpha"), py::arg("min_norm"),
+        release_gil());
 }

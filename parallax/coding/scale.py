@@ -18,6 +18,7 @@ from torch import nn
 from .dictionary import (
     exact_pooled_activity_kernel,
     gradient_step_,
+    gradient_step_and_gram_,
     pooled_activity_of,
     random_dictionary,
     reconstruction_error,
@@ -84,16 +85,20 @@ class ScaleCoder(nn.Module):
 
     def gram(self) -> torch.Tensor:
         """Φ·Φᵀ, recomputed only when the dictionary changed (a frozen coder reuses it)."""
-        key = (
+        key = self._dictionary_key()
+        if self._gram is None or key != self._gram_key:
+            self._gram = gram_matrix(self.dictionary)
+            self._gram_key = key
+        return self._gram
+
+    def _dictionary_key(self) -> tuple:
+        """Changes whenever the dictionary does (in place or replaced)."""
+        return (
             self.dictionary.data_ptr(),
             self.dictionary._version,
             self.dictionary.device,
             self.dictionary.dtype,
         )
-        if self._gram is None or key != self._gram_key:
-            self._gram = gram_matrix(self.dictionary)
-            self._gram_key = key
-        return self._gram
 
     @torch.no_grad()
     def set_reference(self, gray: torch.Tensor) -> None:
@@ -135,16 +140,16 @@ class ScaleCoder(nn.Module):
         images = 1
         if self.robot_updates == "sum":
             images = sum(chunk.residuals.shape[0] for chunk in chunks) // self.spec.patch_count
-        gradient_step_(
-            self.dictionary,
-            chunks,
-            self.learning_rate,
-            kernel=_KERNELS.get(self.pursuit),
-            images=max(images, 1),
-        )
+        step = (self.dictionary, chunks, self.learning_rate, _KERNELS.get(self.pursuit))
         if self.pursuit != "recompute":
-            # The next encoding's Gram matrix, now: in a lockstep this runs while the world
-            # renders the next frames (parallax.experiment).
+            # The next encoding's Gram matrix, now: in a lockstep this runs while the policy
+            # learns and acts (parallax.experiment), in one compiled call where it can.
+            gram = gradient_step_and_gram_(*step, images=max(images, 1))
+            if gram is not None:
+                self._gram, self._gram_key = gram, self._dictionary_key()
+                return
+        gradient_step_(*step, images=max(images, 1))
+        if self.pursuit != "recompute":
             self.gram()
 
     @torch.no_grad()

@@ -333,6 +333,32 @@ def test_the_gradient_of_chunks_of_patches_is_that_of_all_of_them_bit_for_bit(co
         assert torch.equal(stepped_chunks, stepped_whole), kernel
 
 
+def test_the_one_call_dictionary_step_and_gram_are_the_separate_calls_bit_for_bit(
+    compiled,
+) -> None:
+    # the coder's helper thread takes its step in one call, so that it never holds the GIL
+    # between the step's parts (parallax.coding.dictionary.gradient_step_and_gram_)
+    from parallax.coding.dictionary import gradient_step_, gradient_step_and_gram_
+    from parallax.coding.pursuit import gram_matrix
+
+    for dtype in (torch.float32, torch.float64):
+        dictionary = random_dictionary(N, K, torch.Generator().manual_seed(33), dtype=dtype)
+        patches = _realistic_patches(dtype)
+        chunks = [
+            matching_pursuit(part, dictionary, SPARSITY) for part in (patches[:150], patches[150:])
+        ]
+        for kernel in ("torch", "cpp"):
+            separate, together = dictionary.clone(), dictionary.clone()
+            gradient_step_(separate, chunks, 0.2, kernel=kernel, images=2)
+            gram = gradient_step_and_gram_(together, chunks, 0.2, kernel=kernel, images=2)
+            if kernel == "torch":  # the numpy/torch code takes its steps apart
+                assert gram is None and torch.equal(together, dictionary)
+                continue
+            assert torch.equal(together, separate) and not torch.equal(together, dictionary)
+            assert torch.equal(gram, gram_matrix(separate))
+        assert gradient_step_and_gram_(dictionary.clone(), [], 0.2, kernel="cpp") is None
+
+
 def test_theta_from_the_picks_is_torchs_theta_bit_for_bit_where_the_coder_uses_it(compiled) -> None:
     from parallax.coding.dictionary import (
         exact_pooled_activity_kernel,
