@@ -90,15 +90,21 @@ def gradient_step_(
     come from that many images of equal size, and each image's step is η·Bᵀ·R/P of its own P
     patches (B robots' experience counts B times; the atoms are renormalised once, after the
     sum)."""
+    chunks, step = _chunks_and_step(code, learning_rate, images)
+    if step is None:
+        return
+    dictionary.add_(codes_times_residuals(chunks, dictionary.shape[0], kernel), alpha=step)
+    normalise_atoms_(dictionary)
+
+
+def _chunks_and_step(
+    code: SparseCode | Sequence[SparseCode], learning_rate: float, images: int
+) -> tuple[list[SparseCode], float | None]:
+    """The code as its list of chunks, and the step size η·images/P over their P patches
+    (None when there are none)."""
     chunks = [code] if isinstance(code, SparseCode) else list(code)
     patches = sum(chunk.residuals.shape[0] for chunk in chunks)
-    if patches == 0:
-        return
-    dictionary.add_(
-        codes_times_residuals(chunks, dictionary.shape[0], kernel),
-        alpha=learning_rate * images / patches,
-    )
-    normalise_atoms_(dictionary)
+    return chunks, (learning_rate * images / patches if patches else None)
 
 
 def gradient_step_and_gram_(
@@ -113,17 +119,16 @@ def gradient_step_and_gram_(
     thread that runs meanwhile (the policy's, in a lockstep) never waits for it. None, with
     nothing done, where the kernels do not apply (another device, ``kernel`` "torch", no
     patches)."""
-    chunks = [code] if isinstance(code, SparseCode) else list(code)
-    patches = sum(chunk.residuals.shape[0] for chunk in chunks)
+    chunks, step = _chunks_and_step(code, learning_rate, images)
     compiled = native.kernels_for(kernel, dictionary)
-    if compiled is None or patches == 0 or not dictionary.is_contiguous():
+    if compiled is None or step is None or not dictionary.is_contiguous():
         return None
     return compiled.dictionary_step(
         dictionary,
         [chunk.atom_indices for chunk in chunks],
         [chunk.coefficients for chunk in chunks],
         [chunk.residuals for chunk in chunks],
-        learning_rate * images / patches,
+        step,
         _MIN_ATOM_NORM,
     )
 

@@ -139,18 +139,19 @@ class ScaleCoder(nn.Module):
         chunks = [code] if isinstance(code, SparseCode) else list(code)
         images = 1
         if self.robot_updates == "sum":
-            images = sum(chunk.residuals.shape[0] for chunk in chunks) // self.spec.patch_count
+            patches = sum(chunk.residuals.shape[0] for chunk in chunks)
+            images = max(patches // self.spec.patch_count, 1)
         step = (self.dictionary, chunks, self.learning_rate, _KERNELS.get(self.pursuit))
-        if self.pursuit != "recompute":
-            # The next encoding's Gram matrix, now: in a lockstep this runs while the policy
-            # learns and acts (parallax.experiment), in one compiled call where it can.
-            gram = gradient_step_and_gram_(*step, images=max(images, 1))
-            if gram is not None:
-                self._gram, self._gram_key = gram, self._dictionary_key()
-                return
-        gradient_step_(*step, images=max(images, 1))
-        if self.pursuit != "recompute":
-            self.gram()
+        if self.pursuit == "recompute":  # its pursuit reads no Gram matrix
+            gradient_step_(*step, images=images)
+            return
+        # The next encoding's Gram matrix, now: in a lockstep this runs while the policy learns
+        # and acts (parallax.experiment), in one compiled call where it can.
+        gram = gradient_step_and_gram_(*step, images=images)
+        if gram is None:  # the numpy/torch code: the step, then the Gram matrix
+            gradient_step_(*step, images=images)
+            gram = gram_matrix(self.dictionary)
+        self._gram, self._gram_key = gram, self._dictionary_key()
 
     @torch.no_grad()
     def encode_images(
