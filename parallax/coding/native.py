@@ -1,11 +1,12 @@
 """The compiled CPU kernels of the sparse coder (``pursuit_kernel.cpp``, paper §3.3, eq. 1).
 
-Six functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch by patch),
+Seven functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch by patch),
 ``codes_and_residuals`` (dense codes and residuals from the picks), ``residuals_only``,
 ``pooled_activity`` (θ from the picks, summed in torch's order, without the dense codes; checked
 per shape by :func:`parallax.coding.dictionary.exact_pooled_activity_kernel`),
-``codes_times_residuals`` (the dictionary gradient's Bᵀ·R) and ``dictionary_step`` (the whole
-dictionary step and the next Gram matrix in one call, which keeps the GIL released throughout).
+``codes_times_residuals`` (the dictionary gradient's Bᵀ·R), ``dictionary_step`` (the whole
+dictionary step and the next Gram matrix in one call, which keeps the GIL released throughout)
+and ``encode_pairs`` (one scale's whole encoding in one call, likewise).
 :func:`load_kernels` builds the C++ file on first use with ``torch.utils.cpp_extension.load``
 (-O3; needs a C++ compiler and the ``ninja`` package; torch caches the build under
 ``~/.cache/torch_extensions`` or ``$TORCH_EXTENSIONS_DIR``, so later processes only load it),
@@ -70,6 +71,10 @@ def _build() -> ModuleType:
     if capability in _FMA_CAPABILITIES:
         # torch runs its AVX2 kernels on this CPU, so it has AVX2 and FMA too.
         flags += ["-mavx2", "-mfma", "-DPARALLAX_FMA"]
+    if capability == "AVX512":
+        # 32 vector registers and mask registers for the pursuit's 32-byte vectors (torch runs
+        # its AVX512 kernels only where AVX512F, VL, BW and DQ are all present).
+        flags += ["-mavx512f", "-mavx512vl", "-mavx512bw", "-mavx512dq"]
     name = f"parallax_pursuit_{capability.lower()}"
     build_directory = _build_directory(cpp_extension, name)
     if not (build_directory / f"{name}.so").exists():
@@ -148,6 +153,7 @@ def _self_check(module: ModuleType) -> None:
                     reference.codes_times_residuals(picks, coefficients, residuals, atoms),
                 ),
                 *_dictionary_step_pairs(module, dictionary, picks, coefficients, codes, residuals),
+                *_encode_pairs_pairs(module, dictionary, gram, generator),
             ):
                 if not torch.equal(mine, theirs):
                     raise RuntimeError(
@@ -167,6 +173,40 @@ def _dictionary_step_pairs(module, dictionary, picks, coefficients, codes, resid
         stepped, [picks], [coefficients], [residuals], 0.1 / residuals.shape[0], _MIN_ATOM_NORM
     )
     return [("dictionary step", stepped, expected), ("Gram matrix", gram, gram_matrix(expected))]
+
+
+def _encode_pairs_pairs(module, dictionary, gram, generator) -> list:
+    """(name, the kernel's, the numpy/torch code's) for the one-call encoding of a scale, in both
+    normalisations (θ from the picks is compared with the θ kernel, which the coder checks per
+    shape against torch)."""
+    from .dictionary import reconstruction_error
+    from .retina import NEAR_CONSTANT_TOLERANCE, prepare_reference, stack_pair
+
+    half = dictionary.shape[1] // 2
+    raw_reference, raw = torch.randn(2, 2, 9, half, generator=generator, dtype=dictionary.dtype)
+    pairs_checked = []
+    for normalisation in ("per_half", "joint"):
+        cached = prepare_reference(raw_reference, normalisation)
+        pairs = stack_pair(cached, raw, normalisation)
+        flat = pairs.reshape(18, 2 * half)
+        picks, coefficients = reference.gram_steps_cpu(flat @ dictionary.T, gram, 5)
+        _, residuals = reference.codes_and_residuals(flat, dictionary, picks, coefficients)
+        expected = (
+            picks,
+            coefficients,
+            residuals,
+            module.pooled_activity(picks, coefficients, 9, dictionary.shape[0]),
+            reconstruction_error(pairs, residuals.reshape(2, 9, 2 * half)),
+        )
+        got = module.encode_pairs(
+            cached, raw, dictionary, gram, 5, normalisation == "per_half", NEAR_CONSTANT_TOLERANCE
+        )
+        names = ("picks", "coefficients", "residuals", "theta", "e")
+        pairs_checked += [
+            (f"one-call encoding's {name} ({normalisation})", mine, theirs)
+            for name, mine, theirs in zip(names, got, expected)
+        ]
+    return pairs_checked
 
 
 def load_kernels() -> ModuleType | None:

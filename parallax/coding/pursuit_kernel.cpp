@@ -29,16 +29,26 @@
 #include <ATen/Dispatch.h>
 #include <ATen/Parallel.h>
 #include <ATen/core/Tensor.h>
+#include <ATen/ops/cat.h>
 #include <ATen/ops/empty.h>
 #include <ATen/ops/linalg_vector_norm.h>
 #include <ATen/ops/matmul.h>
+#include <ATen/ops/ones_like.h>
+#include <ATen/ops/where.h>
 #include <ATen/ops/zeros.h>
+#include <ATen/ops/zeros_like.h>
 #include <torch/csrc/utils/pybind.h>
+
+#ifdef PARALLAX_FMA
+#include <immintrin.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
+#include <type_traits>
 #include <vector>
 
 namespace {
@@ -75,49 +85,108 @@ template <> struct Simd<double> {
   typedef int64_t Indices __attribute__((vector_size(32)));
 };
 
-// Index of the first maximum of |c| over n values, or of the first NaN if there is one.
+// v − b·g on a vector, rounded as subtract_scaled rounds each element.
 template <typename T>
-int64_t first_abs_argmax(const T* c, int64_t n) {
+inline typename Simd<T>::Values subtract_scaled(typename Simd<T>::Values value, T coefficient,
+                                                typename Simd<T>::Values gram) {
+#ifdef PARALLAX_FMA
+  if constexpr (std::is_same_v<T, float>) {
+    return (typename Simd<T>::Values)_mm256_fnmadd_ps(_mm256_set1_ps(coefficient), (__m256)gram,
+                                                       (__m256)value);
+  } else {
+    return (typename Simd<T>::Values)_mm256_fnmadd_pd(_mm256_set1_pd(coefficient), (__m256d)gram,
+                                                       (__m256d)value);
+  }
+#else
+  return value - coefficient * gram;
+#endif
+}
+
+// Whether any lane of a comparison's mask is set.
+template <typename Mask>
+inline bool any_lane(Mask mask) {
+  bool any = false;
+  for (int l = 0; l < int(sizeof(Mask) / sizeof(mask[0])); ++l) any |= mask[l] != 0;
+  return any;
+}
+
+// With kUpdate, first c ← c − b·G[j] over the n values (rounded as subtract_scaled); then the
+// index of the first maximum of |c|, or of the first NaN if there is one: numpy's argmax of |c|.
+// One pass does both, so that c is read once per step. Each lane of kChains independent vectors
+// keeps the first of its own maxima (strict >), so that one vector's comparisons need not wait
+// for the previous vector's; the lanes are then merged without branches, the larger maximum or
+// of equal ones the smaller index winning, over the chains and then the halves of the vector.
+template <bool kUpdate, typename T>
+int64_t update_and_abs_argmax(T* c, const T* g, T coefficient, int64_t n) {
   using Values = typename Simd<T>::Values;
   using Indices = typename Simd<T>::Indices;
+  using Lane = typename std::remove_reference<decltype(Indices{}[0])>::type;
   constexpr int W = sizeof(Values) / sizeof(T);
-  // Lane l keeps the first maximum of c[l], c[l + W], c[l + 2W], ... (strict >).
-  Values lane_max = Values{} - 1;   // below any |c|
-  Indices lane_index = {}, index = {}, lane_nan = {};
-  for (int l = 0; l < W; ++l) index[l] = l;
-  const int64_t whole = n - n % W;
-  for (int64_t j = 0; j < whole; j += W) {
+  constexpr int kChains = 2;
+  constexpr int64_t kBlock = int64_t(kChains) * W;
+  const Indices magnitude_bits = Indices{} + std::numeric_limits<Lane>::max();  // all but the sign
+  Values lane_max[kChains];
+  Indices lane_index[kChains];
+  Indices lane_nan = {}, lanes = {};
+  for (int l = 0; l < W; ++l) lanes[l] = l;
+  for (int u = 0; u < kChains; ++u) {
+    lane_max[u] = Values{} - 1;   // below any |c|
+    lane_index[u] = Indices{};
+  }
+  auto visit = [&](int64_t j, int u) {
     Values v;
     std::memcpy(&v, c + j, sizeof v);
-    const Values magnitude = v < 0 ? -v : v;
-    const Indices larger = magnitude > lane_max;
-    lane_max = larger ? magnitude : lane_max;
-    lane_index = larger ? index : lane_index;
-    lane_nan |= magnitude != magnitude;
-    index += W;
+    if constexpr (kUpdate) {
+      Values gram;
+      std::memcpy(&gram, g + j, sizeof gram);
+      v = subtract_scaled<T>(v, coefficient, gram);
+      std::memcpy(c + j, &v, sizeof v);
+    }
+    const Values magnitude = (Values)((Indices)v & magnitude_bits);
+    const Indices larger = magnitude > lane_max[u];
+    lane_max[u] = larger ? magnitude : lane_max[u];
+    lane_index[u] = larger ? lanes + Lane(j) : lane_index[u];
+    lane_nan |= magnitude != magnitude;   // a NaN is never larger: it is looked for apart
+  };
+  const int64_t blocks = n - n % kBlock;
+  int64_t j = 0;
+  for (; j < blocks; j += kBlock) {
+    for (int u = 0; u < kChains; ++u) visit(j + u * W, u);
   }
-  // The largest lane maximum; of equal ones, the first index.
-  T best = T(-1);
-  int64_t best_index = 0;
-  bool any_nan = false;
-  for (int l = 0; l < W; ++l) {
-    any_nan |= lane_nan[l] != 0;
-    if (lane_max[l] > best || (lane_max[l] == best && lane_index[l] < best_index)) {
-      best = lane_max[l];
-      best_index = lane_index[l];
+  const int64_t whole = n - n % W;
+  for (; j < whole; j += W) visit(j, 0);   // chain 0's lanes have seen only smaller indices
+  Values top = lane_max[0];
+  Indices at = lane_index[0];
+  auto merge = [&](Values other, Indices other_at) {
+    const Indices take = (other > top) | ((other == top) & (other_at < at));
+    top = take ? other : top;
+    at = take ? other_at : at;
+  };
+  for (int u = 1; u < kChains; ++u) merge(lane_max[u], lane_index[u]);
+  for (int half = W / 2; half >= 1; half /= 2) {
+    Values other;
+    Indices other_at;
+    for (int l = 0; l < W; ++l) {   // a lane permutation; the compiler makes it a shuffle
+      other[l] = top[l ^ half];
+      other_at[l] = at[l ^ half];
+    }
+    merge(other, other_at);
+  }
+  T best = top[0];
+  int64_t best_index = at[0];
+  bool any_nan = any_lane(lane_nan);
+  for (int64_t k = whole; k < n; ++k) {   // the tail comes after every lane's index
+    if constexpr (kUpdate) c[k] = subtract_scaled(c[k], coefficient, g[k]);
+    const T magnitude = std::abs(c[k]);
+    any_nan |= std::isnan(magnitude);
+    if (magnitude > best) {
+      best = magnitude;
+      best_index = k;
     }
   }
   if (any_nan) {
-    for (int64_t j = 0; j < whole; ++j) {
-      if (std::isnan(c[j])) return j;
-    }
-  }
-  for (int64_t j = whole; j < n; ++j) {   // the tail comes after every lane's index
-    const T magnitude = std::abs(c[j]);
-    if (std::isnan(magnitude)) return j;
-    if (magnitude > best) {
-      best = magnitude;
-      best_index = j;
+    for (int64_t k = 0; k < n; ++k) {
+      if (std::isnan(c[k])) return k;
     }
   }
   return best_index;
@@ -128,14 +197,18 @@ void pursue_rows(T* correlations, const T* gram, int64_t n_atoms, int64_t sparsi
                  int64_t* picks, T* coefficients, int64_t begin, int64_t end) {
   for (int64_t row = begin; row < end; ++row) {
     T* c = correlations + row * n_atoms;
+    int64_t pick = update_and_abs_argmax<false, T>(c, nullptr, T(0), n_atoms);
     for (int64_t step = 0; step < sparsity; ++step) {
-      const int64_t pick = first_abs_argmax(c, n_atoms);
       const T coefficient = c[pick];
       picks[row * sparsity + step] = pick;
       coefficients[row * sparsity + step] = coefficient;
       const T* g = gram + pick * n_atoms;
-      for (int64_t j = 0; j < n_atoms; ++j) {
-        c[j] = subtract_scaled(c[j], coefficient, g[j]);
+      if (step + 1 < sparsity) {   // the update and the next step's pick in one pass
+        pick = update_and_abs_argmax<true, T>(c, g, coefficient, n_atoms);
+      } else {
+        for (int64_t j = 0; j < n_atoms; ++j) {
+          c[j] = subtract_scaled(c[j], coefficient, g[j]);
+        }
       }
     }
   }
@@ -398,6 +471,56 @@ at::Tensor dictionary_step(at::Tensor dictionary, const std::vector<at::Tensor>&
   return at::matmul(dictionary, dictionary.t());
 }
 
+// Centred, unit-norm rows along the last axis, near-constant ones exactly 0: the same ATen
+// operations in the same order as parallax.coding.retina.zero_mean_unit_norm.
+at::Tensor zero_mean_unit_norm(const at::Tensor& vectors, double tolerance) {
+  const at::Tensor means = vectors.mean(at::IntArrayRef{-1}, true);
+  const at::Tensor centred = vectors.sub(means);
+  const at::Tensor norms =
+      at::linalg_vector_norm(centred, 2, at::IntArrayRef{-1}, true, c10::nullopt);
+  const at::Tensor floor =
+      means.abs().mul(tolerance * std::sqrt(static_cast<double>(vectors.size(-1))));
+  return centred.mul(at::where(norms.gt(floor), norms.reciprocal(), 0.0));
+}
+
+// e (eq. 4) of (B, P, K) patches and residuals, (B,): parallax.coding.dictionary's
+// reconstruction_error, operation for operation.
+at::Tensor reconstruction_error(const at::Tensor& patches, const at::Tensor& residuals) {
+  const at::Tensor patch_energy = patches.square().sum(at::IntArrayRef{-1});
+  const at::Tensor residual_energy = residuals.square().sum(at::IntArrayRef{-1});
+  const at::Tensor has_energy = patch_energy.gt(0);
+  const at::Tensor ratio =
+      residual_energy.div(at::where(has_energy, patch_energy, at::ones_like(patch_energy)));
+  return at::where(has_energy, ratio, at::zeros_like(ratio)).mean(at::IntArrayRef{1});
+}
+
+// One scale's whole encoding of B images in one call, so that the GIL stays released from start
+// to end (as separate calls, the two scales' threads each waited for the GIL at every one of
+// them): the [I0 ; I(t)] patch pairs γ from the cached I0 patches and the raw I(t) patches
+// (parallax.coding.retina.stack_pair), the pursuit (gram_pursuit on γ·Φᵀ), the residuals, θ from
+// the picks (pooled_activity) and e. Returns the picks, coefficients, residuals (B·P, K), θ
+// (B, N) and e (B,), as ScaleCoder.encode_images computes them from separate calls.
+std::vector<at::Tensor> encode_pairs(const at::Tensor& reference, const at::Tensor& raw,
+                                     const at::Tensor& dictionary, const at::Tensor& gram,
+                                     int64_t sparsity, bool per_half, double tolerance) {
+  TORCH_CHECK(reference.dim() == 3 && raw.dim() == 3 && reference.size(0) == raw.size(0) &&
+                  reference.size(1) == raw.size(1),
+              "reference and raw patches must be (B, P, ·) of the same B and P");
+  const at::Tensor pairs =
+      per_half ? at::cat({reference, zero_mean_unit_norm(raw, tolerance)}, -1)
+               : zero_mean_unit_norm(at::cat({reference, raw}, -1), tolerance);
+  const int64_t images = pairs.size(0), patches = pairs.size(1), dim = pairs.size(2);
+  const at::Tensor flat = pairs.reshape({images * patches, dim});
+  const std::vector<at::Tensor> pursuit =
+      gram_pursuit(at::matmul(flat, dictionary.t()), gram.contiguous(), sparsity);
+  const at::Tensor residuals =
+      residuals_only(flat.contiguous(), dictionary.contiguous(), pursuit[0], pursuit[1]);
+  const at::Tensor activity = pooled_activity(pursuit[0], pursuit[1], patches, dictionary.size(0));
+  const at::Tensor error =
+      reconstruction_error(pairs, residuals.reshape({images, patches, dim}));
+  return {pursuit[0], pursuit[1], residuals, activity, error};
+}
+
 }  // namespace
 
 // The GIL is released while they run: they touch tensors only, and the world renders the next
@@ -423,4 +546,9 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
         "next Gram matrix, returned", py::arg("dictionary"), py::arg("picks"),
         py::arg("coefficients"), py::arg("residuals"), py::arg("alpha"), py::arg("min_norm"),
         release_gil());
+  m.def("encode_pairs", &encode_pairs,
+        "one scale's encoding in one call: patch pairs, pursuit, residuals, theta from the "
+        "picks and e; returns picks, coefficients, residuals, theta, e", py::arg("reference"),
+        py::arg("raw"), py::arg("dictionary"), py::arg("gram"), py::arg("sparsity"),
+        py::arg("per_half"), py::arg("tolerance"), release_gil());
 }

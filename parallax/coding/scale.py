@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from . import native
 from .dictionary import (
     exact_pooled_activity_kernel,
     gradient_step_,
@@ -24,7 +25,13 @@ from .dictionary import (
     reconstruction_error,
 )
 from .pursuit import SparseCode, gram_matrix, matching_pursuit, matching_pursuit_recompute
-from .retina import ScaleSpec, prepare_reference, scale_patches, stack_pair
+from .retina import (
+    NEAR_CONSTANT_TOLERANCE,
+    ScaleSpec,
+    prepare_reference,
+    scale_patches,
+    stack_pair,
+)
 
 #: "gram": the Gram-form pursuit, on the CPU in the compiled kernels when they can be built (see
 #: ``PARALLAX_PURSUIT_KERNEL`` in :mod:`parallax.coding.native`); "gram_cpp" and "gram_torch"
@@ -109,13 +116,19 @@ class ScaleCoder(nn.Module):
     def patch_pairs(self, gray: torch.Tensor, robots: slice = slice(None)) -> torch.Tensor:
         """γ for every patch: (B,H,W) gray current images → (B, P, K) [I0 half ; I(t) half];
         ``robots`` picks the references the images belong to (all of them by default)."""
+        reference, raw = self._reference_and_raw(gray, robots)
+        return stack_pair(reference, raw, self.normalisation)
+
+    def _reference_and_raw(
+        self, gray: torch.Tensor, robots: slice
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The cached I0 patches of ``robots`` and the raw patches of their (B,H,W) images."""
         if self.reference is None:
             raise RuntimeError("no reference image: call set_reference(I0) before encoding")
         reference = self.reference[robots]
         if gray.shape[0] != reference.shape[0]:
             raise ValueError(f"got {gray.shape[0]} images for {reference.shape[0]} references")
-        raw = scale_patches(gray.to(self.dictionary.device), self.spec)
-        return stack_pair(reference, raw, self.normalisation)
+        return reference, scale_patches(gray.to(self.dictionary.device), self.spec)
 
     def encode(self, patches: torch.Tensor, dense_codes: bool = True) -> SparseCode:
         """Matching pursuit (eq. 1) of (M, K) patches on the current dictionary (``dense_codes``:
@@ -159,18 +172,35 @@ class ScaleCoder(nn.Module):
     ) -> tuple[ScaleOutput, SparseCode]:
         """θ^j and e^j of (B,H,W) gray images against the references of ``robots``, and the
         sparse code a dictionary step learns from; the dictionary is left alone."""
-        pairs = self.patch_pairs(gray, robots)
-        batch, patches, dim = pairs.shape
+        reference, raw = self._reference_and_raw(gray, robots)
+        batch, patches = raw.shape[:2]
         # θ straight from the picks where the compiled kernel gives torch's θ exactly: the dense
         # (M, N) codes are most of the pursuit's memory traffic.
         from_picks = (
             self.pursuit != "recompute"
-            and pairs.device.type == "cpu"
+            and raw.device.type == "cpu"
             and exact_pooled_activity_kernel(
-                patches, self.atoms, self.sparsity, pairs.dtype, _KERNELS[self.pursuit]
+                patches, self.atoms, self.sparsity, raw.dtype, _KERNELS[self.pursuit]
             )
         )
-        code = self.encode(pairs.reshape(batch * patches, dim), dense_codes=not from_picks)
+        if from_picks:
+            # The whole encoding in one compiled call, which keeps the GIL released throughout:
+            # the other scale encodes on another thread at the same time (same results).
+            compiled = native.kernels_for(_KERNELS[self.pursuit], raw)
+            picks, coefficients, residuals, activity, error = compiled.encode_pairs(
+                reference,
+                raw,
+                self.dictionary,
+                self.gram(),
+                self.sparsity,
+                self.normalisation == "per_half",
+                NEAR_CONSTANT_TOLERANCE,
+            )
+            code = SparseCode(picks, coefficients, None, residuals)
+            return ScaleOutput(activity=activity, error=error), code
+        pairs = stack_pair(reference, raw, self.normalisation)
+        dim = pairs.shape[-1]
+        code = self.encode(pairs.reshape(batch * patches, dim))
         output = ScaleOutput(
             activity=pooled_activity_of(code, batch, self.atoms),
             error=reconstruction_error(pairs, code.residuals.reshape(batch, patches, dim)),

@@ -247,6 +247,33 @@ def test_compiled_and_torch_pursuit_loops_learn_bit_identical_dictionaries() -> 
         assert torch.equal(coders[0].dictionaries[name], coders[1].dictionaries[name])
 
 
+@pytest.mark.parametrize("normalisation", ["per_half", "joint"])
+def test_the_one_call_encoding_is_the_separate_calls_bit_for_bit(normalisation: str) -> None:
+    from parallax.coding import native
+    from parallax.coding.dictionary import pooled_activity_of, reconstruction_error
+
+    if native.load_kernels() is None:
+        pytest.skip(f"the fused pursuit kernel is unavailable: {native.kernel_failure()}")
+    coder = _coder(pursuit="gram_cpp", normalisation=normalisation)
+    coder.set_reference(_photo_batch(3))
+    current = _photo_batch(3, shift=2)
+    current[1] = 128  # a flat image: every patch of it near-constant
+    gray = as_gray_batch(current)
+    for scale in coder.coders.values():
+        output, code = scale.encode_images(gray)
+        assert code.codes is None  # the one call ran
+        pairs = scale.patch_pairs(gray)
+        batch, patches, dim = pairs.shape
+        separate = scale.encode(pairs.reshape(batch * patches, dim), dense_codes=False)
+        assert torch.equal(code.atom_indices, separate.atom_indices)
+        assert torch.equal(code.coefficients, separate.coefficients)
+        assert torch.equal(code.residuals, separate.residuals)
+        assert torch.equal(output.activity, pooled_activity_of(separate, batch, scale.atoms))
+        residuals = separate.residuals.reshape(batch, patches, dim)
+        assert torch.equal(output.error, reconstruction_error(pairs, residuals))
+        assert torch.isfinite(output.error).all()
+
+
 @pytest.mark.parametrize(
     ("overrides", "message"),
     [
