@@ -1,9 +1,12 @@
 // Fused Gram-form matching pursuit on the CPU: the paper's eq. 1 (§3.3), plain MP with k steps,
-// and the two sparse products around it (the residuals and the dictionary gradient Bᵀ·R).
+// and the two sparse products around it (the residuals and the dictionary gradient Bᵀ·R); and
+// two one-call compositions of them with ATen operations, which keep the GIL released from start
+// to end: a scale's whole encoding (encode_pairs) and its dictionary step with the next Gram
+// matrix (dictionary_step).
 //
 // parallax/coding/native.py builds this file on first use (torch.utils.cpp_extension.load);
-// parallax/coding/pursuit.py and dictionary.py call it in place of the numpy/torch code of
-// reference.py.
+// parallax/coding/pursuit.py, dictionary.py and scale.py call it in place of the numpy/torch
+// code of reference.py.
 //
 // gram_pursuit: patch by patch, a row of correlations c = Φ·γ (N values, a few KiB, in L1 cache
 // for all the steps):
@@ -13,6 +16,8 @@
 //                      record j and b = c_j
 //                      c ← c − b·G[j]          (G = Φ·Φᵀ, so c stays the residual's correlations)
 //
+// One pass over c does each step's update and the next step's argmax.
+//
 // The update rounds exactly like torch's addcmul_(b, G[j], value=-1) on this CPU: a fused
 // multiply-add when torch's kernels use them (PARALLAX_FMA, set by native.py for its AVX2 and
 // AVX512 kernels), a multiply then a subtraction otherwise (built with -ffp-contract=off so the
@@ -21,8 +26,8 @@
 //
 // codes_and_residuals and codes_times_residuals replace scatter_add_ and torch's embedding_bag
 // (reference.py's codes_and_residuals and codes_times_residuals) and add up in the same order
-// with the same rounding, so they too are bit-identical. native.py checks all three against
-// reference.py once before the coder uses them.
+// with the same rounding, so they too are bit-identical. native.py checks every function against
+// the numpy/torch code once before the coder uses them.
 
 // The few ATen headers it needs rather than <torch/extension.h>, which would make every build
 // compile most of torch's headers.
