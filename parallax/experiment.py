@@ -28,7 +28,7 @@ import parallax.envs
 from parallax.coding import CoderOutput
 from parallax.distance.planner import MovementPlanner
 from parallax.envs.walk import Walker, walk_robots
-from parallax.lockstep import Lockstep, stack_images
+from parallax.lockstep import Lockstep, robot_turns, stack_images
 from parallax.metrics import position_label
 
 
@@ -83,6 +83,7 @@ def worlds(cfg: DictConfig, lateral_positions: list[float], stimuli_split: str |
     seed; ``stimuli_split`` replaces env.stimuli.split (parallax-eval: heldout)."""
     env_kwargs = OmegaConf.to_container(cfg.env, resolve=True)
     robots = int(env_kwargs.pop("robots"))
+    env_kwargs.pop("robots_per_turn")  # the order of the robots' turns: Experiment
     env_kwargs.pop("walk")  # the body's walk: parallax.envs.walk, body_walkers
     if stimuli_split is not None:
         env_kwargs["stimuli"] = {**env_kwargs["stimuli"], "split": stimuli_split}
@@ -139,6 +140,7 @@ class Experiment:
         self.stages = [[float(l) for l in stage] for stage in stages]
 
         self.robots = int(cfg.env.robots)
+        self.robots_per_turn = int(cfg.env.robots_per_turn)
         self.trial_length = int(cfg.env.trial_length)
         # One seed per robot's world, then the coder, the policy and the distance learner.
         seeds = seeds_for(cfg.seed, self.robots + 3)
@@ -289,46 +291,60 @@ class Experiment:
             self.envs[0].task.start_route(lateral[first])
         index_of = {l: k for k, l in enumerate(lateral)}
         valid = torch.ones(self.robots, dtype=torch.bool, device=self.device)  # every robot learns
-        reference_theta = previous = None
-        with Lockstep(self.envs, self.coder) as world:
-            obs, out, last = world.reset()  # every robot's stimulus: I0 cached, I(0) encoded
-            while True:
-                iteration, p = int(obs[0]["iteration"]), int(obs[0]["position_index"])
-                if route is not None:  # the episode's p-th position is this one of L
-                    p = index_of[float(obs[0]["lateral_position"])]
-                if iteration == 0:  # a new trial: the step into it crossed a reset, not learnt
-                    previous = None
-                    if self.policy.uses_reference_state:  # with the dictionaries of these frames
-                        references = stack_images(obs, "reference", self.device)
-                        reference_theta = self.coder(references, learn=False).state
-                if learn_dictionaries:
-                    # the paper's last step, started now to run during the policy's turn (the
-                    # policy reads no dictionary) and waited for before the next encoding
-                    world.start_dictionary_step()
-                pans = np.array([float(o["pan"]) for o in obs])
-                rewards = out.reward.cpu().numpy().astype(np.float64)
-                tally.encoded(obs, out, pans, rewards, p)
-                change = (
-                    None if previous is None else (rewards, previous.rewards, previous.increments)
-                )
-                state = self.policy.state(out.state, reference_theta, pans, lateral[p], change)
-                if learn and previous is not None:
-                    transition = (previous.state, previous.action, out.reward, state, valid)
-                    tally.updated(self.policy.update(*transition))
-                if last:
-                    break
-                if route is not None and iteration == self.trial_length - 1:
-                    tally.visited.append(p)
-                    chosen = route(list(tally.visited), tally.presentation(obs, False))
-                    if chosen is None:
-                        break
-                    if chosen in tally.visited:
-                        raise ValueError(f"the route visits position {chosen} of L twice")
-                    self.envs[0].task.visit_next(lateral[chosen])
-                action = self.policy.act(state, greedy=greedy)
-                increments = self.policy.action_values[action].cpu().numpy()
-                previous = _Step(state, action, rewards, increments)
-                obs, out, last = world.step(increments)
+        turns = robot_turns(self.robots, self.robots_per_turn)
+        # each turn's last step (for the transition it learns from next) and θ(I0, I0)
+        previous: list[_Step | None] = [None] * len(turns)
+        reference_theta: list[torch.Tensor | None] = [None] * len(turns)
+        obs: list[dict] = [{} for _ in range(self.robots)]  # each robot's latest observation
+        running = True
+        with Lockstep(self.envs, self.coder, turns) as world:
+            world.reset()  # every robot's stimulus: I0 cached
+            while running:
+                for k, robots in enumerate(turns):
+                    turn_obs, out, last = world.frames(k)  # I(t) encoded
+                    obs[robots] = turn_obs
+                    iteration, p = int(turn_obs[0]["iteration"]), int(turn_obs[0]["position_index"])
+                    if route is not None:  # the episode's p-th position is this one of L
+                        p = index_of[float(turn_obs[0]["lateral_position"])]
+                    if iteration == 0:  # a new trial: the step into it crossed a reset, not learnt
+                        previous[k] = None
+                        if self.policy.uses_reference_state:  # with the dictionaries of I(t)
+                            references = stack_images(turn_obs, "reference", self.device)
+                            reference_theta[k] = self.coder.encode(references, robots).output.state
+                    if learn_dictionaries and k == len(turns) - 1:
+                        # the paper's last step, from every turn's encoding, started now to run
+                        # during the policy's turn (the policy reads no dictionary) and waited
+                        # for before the next iteration's first encoding
+                        world.start_dictionary_step()
+                    pans = np.array([float(o["pan"]) for o in turn_obs])
+                    rewards = out.reward.cpu().numpy().astype(np.float64)
+                    tally.encoded(turn_obs, out, pans, rewards, p, robots)
+                    before = previous[k]
+                    change = None
+                    if before is not None:
+                        change = (rewards, before.rewards, before.increments)
+                    state = self.policy.state(
+                        out.state, reference_theta[k], pans, lateral[p], change
+                    )
+                    if learn and before is not None:
+                        transition = (before.state, before.action, out.reward, state, valid[robots])
+                        tally.updated(self.policy.update(*transition))
+                    if last:
+                        running = False
+                        continue
+                    if route is not None and iteration == self.trial_length - 1:
+                        tally.visited.append(p)
+                        chosen = route(list(tally.visited), tally.presentation(obs, False))
+                        if chosen is None:
+                            running = False
+                            break
+                        if chosen in tally.visited:
+                            raise ValueError(f"the route visits position {chosen} of L twice")
+                        self.envs[0].task.visit_next(lateral[chosen])
+                    action = self.policy.act(state, greedy=greedy)
+                    increments = self.policy.action_values[action].cpu().numpy()
+                    previous[k] = _Step(state, action, rewards, increments)
+                    world.step(k, increments)
         presentation = tally.presentation(obs, keep_view)
         presentation.waits = dict(world.seconds)  # the last dictionary step's wait included
         return presentation
@@ -391,28 +407,39 @@ class _Tally:
         self.pans, self.targets, self.start_pans = blank.copy(), blank.copy(), blank.copy()
         self.best_pans, self.best_rewards = blank.copy(), np.full(shape, -np.inf)
         self.visited: list[int] | None = [] if routed else None
+        # sums over robots and iterations, and the robot-encodings they add up
         self.reward_sum, self.error_sums, self.encodings = 0.0, {}, 0
         self.stat_sums: dict[str, float] = {}
         self.updates = 0
 
     def encoded(
-        self, obs: list[dict], out: CoderOutput, pans: np.ndarray, rewards: np.ndarray, p: int
+        self,
+        obs: list[dict],
+        out: CoderOutput,
+        pans: np.ndarray,
+        rewards: np.ndarray,
+        p: int,
+        robots: slice = slice(None),
     ) -> None:
-        """The coder's output ``out`` (rewards (B,) in float64) for images seen at ``pans`` (B,),
-        at position ``p`` of L."""
+        """The coder's output ``out`` (rewards in float64) for the images of ``robots`` (all by
+        default) seen at ``pans``, at position ``p`` of L."""
         iteration = int(obs[0]["iteration"])
-        self.reward_sum += float(out.reward.mean())
+        self.reward_sum += float(out.reward.sum())
         for scale, e in out.errors.items():
-            self.error_sums[scale] = self.error_sums.get(scale, 0.0) + float(e.mean())
-        self.encodings += 1
+            self.error_sums[scale] = self.error_sums.get(scale, 0.0) + float(e.sum())
+        self.encodings += len(rewards)
         if iteration == 0:
-            self.start_pans[:, p] = pans
-        better = rewards > self.best_rewards[:, p]  # ties keep the earlier pan
-        self.best_rewards[better, p] = rewards[better]
-        self.best_pans[better, p] = pans[better]
+            self.start_pans[robots, p] = pans
+        best = self.best_rewards[robots, p]
+        better = rewards > best  # ties keep the earlier pan
+        best[better] = rewards[better]
+        self.best_rewards[robots, p] = best
+        best_pans = self.best_pans[robots, p]
+        best_pans[better] = pans[better]
+        self.best_pans[robots, p] = best_pans
         if iteration == self.trial_length - 1:  # q_p, and α* there
-            self.pans[:, p] = pans
-            self.targets[:, p] = [float(o["target_pan"]) for o in obs]
+            self.pans[robots, p] = pans
+            self.targets[robots, p] = [float(o["target_pan"]) for o in obs]
 
     def updated(self, stats: dict[str, float]) -> None:
         for k, v in stats.items():
@@ -434,7 +461,7 @@ class _Tally:
             best_pans=self.best_pans,
             distances=np.array([float(o["distance"]) for o in obs] if obs else [np.nan] * robots),
             textures=np.array([int(o["texture_index"]) for o in obs] if obs else [-1] * robots),
-            steps=self.encodings,
+            steps=self.encodings // robots,
             reward=self.reward_sum / encodings,
             errors={k: v / encodings for k, v in self.error_sums.items()},
             policy_stats={k: v / updates for k, v in self.stat_sums.items()} if updates else {},

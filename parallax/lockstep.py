@@ -6,15 +6,18 @@
 
 and calls a :class:`Lockstep` for the parts that run on other threads:
 
-* the worlds reset and step on the GL thread (:func:`parallax.envs.gl_thread`, MuJoCo renders
-  without the GIL) while this thread encodes: the robots' frames are encoded chunk by chunk, in
-  robot order, each chunk as soon as its frames are there (:func:`encode_chunk`: 4 robots at a
-  time on the CPU, all of them in one call on a GPU);
-* the dictionary step of an iteration runs on the coder's helper thread from
-  :meth:`Lockstep.start_dictionary_step` on, while the policy learns and acts (a turn in which
-  only this thread would work: the world waits for the actions) and while the next frames
-  render; :meth:`Lockstep.step` waits for it before it encodes again, and leaving the ``with``
-  block waits for the last one — also when an error leaves it, so no step runs on behind it.
+* the robots take their turns in groups (``env.robots_per_turn``, :func:`robot_turns`): each
+  turn's frames are encoded, then its robots' transitions update the policy and the policy acts
+  for them, and its worlds step (on the GL thread, where MuJoCo renders without the GIL) while
+  the later turns are encoded and act. So a turn's frames render during the other turns' work,
+  and the policy's turns, in which only this thread would work, overlap the rendering;
+* a turn's robots are encoded chunk by chunk as their frames arrive (:func:`encode_chunk`: 4
+  robots at a time on the CPU, all of them in one call on a GPU);
+* the dictionary step of an iteration, from every turn's encoding, runs on the coder's helper
+  thread from :meth:`Lockstep.start_dictionary_step` on (after the last turn's encoding), while
+  the policy takes the last turn; the next iteration's first encoding waits for it, and leaving
+  the ``with`` block waits for the last one — also when an error leaves it, so nothing runs on
+  behind it.
 
 :attr:`Lockstep.seconds` adds up where the calling thread spent its time in the lockstep:
 waiting for the frames it encodes, waiting for the dictionary step, and encoding (its own scale,
@@ -22,7 +25,8 @@ and waiting for the helper's); the rest of its time is what the caller does betw
 (the policy's turn) and a presentation's start (its worlds' resets and the references' patches).
 ``parallax-bench`` prints it per lockstep iteration, to show which part holds a step up.
 
-Every value is computed as in the plain sequence, in the same order per robot and per dictionary
+Every value is computed as in the plain sequence — each iteration, turn by turn: encode, learn,
+act, step; then the dictionary step — in the same order per robot and per dictionary
 (``tests/test_experiment.py`` runs that sequence beside it), so the results do not depend on the
 schedule — with one torch thread (``train.threads=1``, the default): with more, the matrix
 library may split a product of a chunk's rows otherwise than one of all rows.
@@ -55,6 +59,13 @@ def encode_chunk(device: torch.device, robots: int) -> int:
     return ENCODE_CHUNK if device.type == "cpu" else max(robots, 1)
 
 
+def robot_turns(robots: int, robots_per_turn: int) -> list[slice]:
+    """The robots' turns (``env.robots_per_turn``): consecutive slices of that many robots, the
+    last one maybe smaller; 0 puts all of them in one turn."""
+    size = robots if robots_per_turn <= 0 else robots_per_turn
+    return [slice(first, min(first + size, robots)) for first in range(0, robots, size)]
+
+
 #: What :attr:`Lockstep.seconds` adds up, in this order.
 WAITS = ("frames", "dictionary_step", "encoding")
 
@@ -74,13 +85,19 @@ def stack_images(observations: Sequence[dict], key: str, device: torch.device) -
 
 
 class Lockstep:
-    """One presentation of B robots' worlds stepped together; use it as a context manager."""
+    """One presentation of B robots' worlds stepped together; use it as a context manager.
 
-    def __init__(self, envs: Sequence[Any], coder: MultiScaleCoder) -> None:
+    The robots take their turns in groups (``turns``: consecutive robot slices, in robot order):
+    each iteration encodes turn 0's frames, then turn 1's, …; a turn's worlds step as soon as its
+    actions are known (:meth:`step`), so they render while the later turns are encoded and act."""
+
+    def __init__(self, envs: Sequence[Any], coder: MultiScaleCoder, turns: Sequence[slice]) -> None:
         self.envs = list(envs)
         self.coder = coder
+        self.turns = list(turns)
         self._world = parallax.envs.gl_thread()
-        # the last frames' encodings, chunk by chunk, for their dictionary step
+        self._futures: list[list[Future]] = [[] for _ in self.turns]  # each turn's next frames
+        # this iteration's encodings so far, chunk by chunk, for its dictionary step
         self._encodings: list[Encoding] = []
         self._learning: Future | None = None  # a dictionary step running on the helper thread
         #: the calling thread's seconds in each of :data:`WAITS` so far
@@ -95,27 +112,36 @@ class Lockstep:
         elif self._learning is not None:
             wait([self._learning])  # it reads and writes the dictionaries: never leave it running
 
-    def reset(self) -> Frames:
-        """Every world draws its stimulus; the coder caches every I0, then encodes the first
-        frames."""
+    def reset(self) -> None:
+        """Every world draws its stimulus and the coder caches every I0; :meth:`frames` then
+        encodes the first frames, turn by turn."""
         futures = [self._world.submit(env.reset) for env in self.envs]
         references = [future.result().observation for future in futures]
         self.coder.set_reference(stack_images(references, "reference", self.coder.device))
-        return self._encode_as_they_arrive(futures)
+        self._futures = [futures[robots] for robots in self.turns]
 
-    def step(self, pan_increments: Sequence[float]) -> Frames:
-        """Each robot turns its eyes by its increment (degrees) and renders; the frames are encoded
-        after the running dictionary step has finished, with the dictionaries it leaves."""
-        futures = [
+    def frames(self, turn: int) -> Frames:
+        """The turn's robots' frames, encoded as they arrive; the first turn of an iteration
+        waits for the running dictionary step and encodes with the dictionaries it leaves."""
+        if turn == 0:
+            self.finish_dictionary_step()
+            self._encodings = []
+        futures, self._futures[turn] = self._futures[turn], []
+        return self._encode_as_they_arrive(futures, self.turns[turn].start)
+
+    def step(self, turn: int, pan_increments: Sequence[float]) -> None:
+        """Each robot of the turn turns its eyes by its increment (degrees) and renders, on the
+        GL thread after the worlds already handed to it."""
+        envs = self.envs[self.turns[turn]]
+        self._futures[turn] = [
             self._world.submit(env.step, float(increment))
-            for env, increment in zip(self.envs, pan_increments, strict=True)
+            for env, increment in zip(envs, pan_increments, strict=True)
         ]
-        self.finish_dictionary_step()  # while the frames render
-        return self._encode_as_they_arrive(futures)
 
     def start_dictionary_step(self) -> None:
-        """The coder's dictionary step from the last frames' encoding, on its helper thread (CPU;
-        elsewhere at once). Nothing may read the dictionaries until it has finished."""
+        """The coder's dictionary step from this iteration's encodings (every turn's), on its
+        helper thread (CPU; elsewhere at once). Nothing may read the dictionaries until it has
+        finished: the next :meth:`frames` of turn 0 waits for it."""
         self.finish_dictionary_step()
         self._learning = self.coder.learn_from_async(self._encodings)
 
@@ -135,22 +161,24 @@ class Lockstep:
         finally:
             self.seconds[wait] += time.perf_counter() - started
 
-    def _encode_as_they_arrive(self, futures: list[Future]) -> Frames:
+    def _encode_as_they_arrive(self, futures: list[Future], first_robot: int = 0) -> Frames:
         timesteps: list[Any] = []
-        self._encodings = []
+        encodings = []
         chunk = encode_chunk(self.coder.device, len(futures))
         for first in range(0, len(futures), chunk):
-            robots = slice(first, min(first + chunk, len(futures)))
+            count = min(chunk, len(futures) - first)
             with self._timed("frames"):
-                arrived = [future.result() for future in futures[robots]]
+                arrived = [future.result() for future in futures[first : first + count]]
             timesteps += arrived
             with self._timed("encoding"):
                 images = stack_images(
                     [ts.observation for ts in arrived], "image", self.coder.device
                 )
-                self._encodings.append(self.coder.encode(images, robots))
+                robots = slice(first_robot + first, first_robot + first + count)
+                encodings.append(self.coder.encode(images, robots))
+        self._encodings += encodings
         return Frames(
             observations=[ts.observation for ts in timesteps],
-            output=CoderOutput.join([encoding.output for encoding in self._encodings]),
+            output=CoderOutput.join([encoding.output for encoding in encodings]),
             last=timesteps[0].last(),
         )

@@ -4,6 +4,7 @@ coder's helper thread, and none of it changes a number."""
 
 from __future__ import annotations
 
+import sys
 import threading
 
 import numpy as np
@@ -24,7 +25,7 @@ def _presentations(overrides: list[str], chunk: int, monkeypatch, count: int = 2
     encode = exp.coder.encode
 
     def recording_encode(images, robots=slice(None)):
-        if robots != slice(None):  # not the coder's own call for θ_ref
+        if sys._getframe(1).f_globals["__name__"] == lockstep.__name__:  # I(t), not θ_ref's I0
             slices.append((robots.start, robots.stop))
         return encode(images, robots)
 
@@ -37,43 +38,55 @@ def _presentations(overrides: list[str], chunk: int, monkeypatch, count: int = 2
 
 
 def _plain_presentation(exp: Experiment) -> tuple[np.ndarray, float]:
-    """The paper's loop written plainly on this thread: every world resets, then each iteration
-    one encoding of all the robots' images followed at once by its dictionary step (the coder's
-    forward), the policy's update and action, and the worlds stepped one after the other.
-    Returns the pans q_p (B, r) and the mean reward, as a Presentation reports them."""
+    """The paper's loop written plainly on this thread, the robots in their turns: every world
+    resets, then each iteration, turn by turn, the encoding of the turn's images, the policy's
+    update and action and the turn's worlds stepped one after the other; after the last turn the
+    dictionary step from every turn's encoding. Returns the pans q_p (B, r) and the mean reward,
+    as a Presentation reports them."""
 
     def images(observations, key):
         return torch.from_numpy(np.stack([o[key] for o in observations]))
 
     timesteps = [env.reset() for env in exp.envs]
-    obs = [ts.observation for ts in timesteps]
-    exp.coder.set_reference(images(obs, "reference"))
+    exp.coder.set_reference(images([ts.observation for ts in timesteps], "reference"))
     lateral = list(exp.envs[0].task.lateral_positions)
     final_pans = np.zeros((exp.robots, len(lateral)))
     reward_sum, encodings = 0.0, 0
-    valid = torch.ones(exp.robots, dtype=torch.bool)
-    reference = previous = None
-    while True:
-        iteration, p = int(obs[0]["iteration"]), int(obs[0]["position_index"])
-        if iteration == 0 and exp.policy.uses_reference_state:
-            reference = exp.coder(images(obs, "reference"), learn=False).state
-        out = exp.coder(images(obs, "image"), learn=exp.coder.learn)
-        reward_sum, encodings = reward_sum + float(out.reward.mean()), encodings + 1
-        pans = np.array([float(o["pan"]) for o in obs])
-        rewards = out.reward.numpy().astype(np.float64)
-        change = None if iteration == 0 else (rewards, *previous[2:])
-        state = exp.policy.state(out.state, reference, pans, lateral[p], change)
-        if iteration > 0:
-            exp.policy.update(*previous[:2], out.reward, state, valid)
-        if iteration == exp.trial_length - 1:
-            final_pans[:, p] = pans
-        if timesteps[0].last():
-            return final_pans, reward_sum / encodings
-        action = exp.policy.act(state)
-        increments = exp.policy.action_values[action].numpy()
-        previous = (state, action, rewards, increments)
-        timesteps = [env.step(float(a)) for env, a in zip(exp.envs, increments, strict=True)]
-        obs = [ts.observation for ts in timesteps]
+    turns = lockstep.robot_turns(exp.robots, exp.robots_per_turn)
+    reference: list = [None] * len(turns)
+    previous: list = [None] * len(turns)
+    last = False
+    while not last:
+        encoded = []
+        for k, robots in enumerate(turns):
+            obs = [ts.observation for ts in timesteps[robots]]
+            iteration, p = int(obs[0]["iteration"]), int(obs[0]["position_index"])
+            if iteration == 0 and exp.policy.uses_reference_state:
+                reference[k] = exp.coder.encode(images(obs, "reference"), robots).output.state
+            encoding = exp.coder.encode(images(obs, "image"), robots)
+            encoded.append(encoding)
+            out = encoding.output
+            reward_sum, encodings = reward_sum + float(out.reward.sum()), encodings + len(obs)
+            pans = np.array([float(o["pan"]) for o in obs])
+            rewards = out.reward.numpy().astype(np.float64)
+            change = None if iteration == 0 else (rewards, *previous[k][2:])
+            state = exp.policy.state(out.state, reference[k], pans, lateral[p], change)
+            if iteration > 0:
+                valid = torch.ones(len(obs), dtype=torch.bool)
+                exp.policy.update(*previous[k][:2], out.reward, state, valid)
+            if iteration == exp.trial_length - 1:
+                final_pans[robots, p] = pans
+            last = timesteps[robots][0].last()
+            if last:
+                continue
+            action = exp.policy.act(state)
+            increments = exp.policy.action_values[action].numpy()
+            previous[k] = (state, action, rewards, increments)
+            for b, increment in zip(range(robots.start, robots.stop), increments, strict=True):
+                timesteps[b] = exp.envs[b].step(float(increment))
+        if exp.coder.learn:
+            exp.coder.learn_from(encoded)
+    return final_pans, reward_sum / encodings
 
 
 def _assert_same_states(first: dict, second: dict) -> None:
@@ -114,6 +127,9 @@ def test_robots_encoded_chunk_by_chunk_give_the_numbers_of_one_batch(
         (1, []),
         (3, ["policy.feature_norm=difference", "policy.eye_position_reference_m=0.5"]),
         (3, ["policy.robot_updates=mean", "coder.robot_updates=mean"]),
+        # turns of 2 and 1 robots (the first encoded in one chunk), and of one robot each
+        (3, ["env.robots_per_turn=2", "policy.eye_position_reference_m=0.5"]),
+        (3, ["env.robots_per_turn=1", "policy.robot_updates=mean"]),
     ],
 )
 def test_the_lockstep_gives_the_numbers_of_the_plain_loop(
@@ -141,6 +157,38 @@ def test_the_lockstep_gives_the_numbers_of_the_plain_loop(
     finally:
         scheduled.close()
         plain.close()
+
+
+@pytest.mark.parametrize(
+    ("per_turn", "batches"), [(0, [5]), (2, [2, 2, 1]), (4, [4, 1]), (1, [1] * 5)]
+)
+def test_each_turn_of_robots_learns_and_acts_before_the_next(
+    tiny_overrides, per_turn, batches
+) -> None:
+    cfg = compose(tiny_overrides + ["env.robots=5", f"env.robots_per_turn={per_turn}"])
+    exp = Experiment(cfg)
+    calls = []
+    update, act = exp.policy.update, exp.policy.act
+
+    def recording_update(phi, *rest):
+        calls.append(("update", phi.shape[0]))
+        return update(phi, *rest)
+
+    def recording_act(phi, greedy=False):
+        calls.append(("act", phi.shape[0]))
+        return act(phi, greedy=greedy)
+
+    exp.policy.update, exp.policy.act = recording_update, recording_act
+    try:
+        presentation = exp.run_presentation()
+    finally:
+        exp.close()
+    # the first iteration acts without a transition to learn from; then each turn's robots
+    # learn from their step, then act, turn after turn
+    assert calls[: len(batches)] == [("act", size) for size in batches]
+    one_iteration = [call for size in batches for call in (("update", size), ("act", size))]
+    assert calls[len(batches) : 3 * len(batches)] == one_iteration
+    assert presentation.steps == exp.trial_length * len(exp.lateral_positions)
 
 
 def test_one_robot_learns_the_same_whichever_way_robots_updates_combine(
@@ -284,7 +332,7 @@ def test_frames_are_encoded_in_chunks_on_the_cpu_and_in_one_call_on_a_gpu(device
         future.set_result(_TimeStep(np.zeros((8, 8, 3), dtype=np.uint8)))
         futures.append(future)
     coder = _RecordingCoder(device)
-    frames = lockstep.Lockstep([], coder)._encode_as_they_arrive(futures)
+    frames = lockstep.Lockstep([], coder, [])._encode_as_they_arrive(futures)
     assert len(coder.calls) == calls
     assert coder.calls[0][0] == 0 and coder.calls[-1][1] == robots
     assert frames.output.state.shape == (robots, 2)

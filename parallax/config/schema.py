@@ -79,8 +79,8 @@ class WalkConfig:
 class EnvConfig:
     """The world (§4.1): HOAP-3-like humanoid, textured panel, still background, in MuJoCo.
 
-    The keyword arguments of ``parallax.envs.load`` (``robots`` aside); the lateral list L comes
-    from ``curriculum`` and the perturbation from ``perturbation``.
+    The keyword arguments of ``parallax.envs.load`` (``robots`` and ``robots_per_turn`` aside);
+    the lateral list L comes from ``curriculum`` and the perturbation from ``perturbation``.
     """
 
     #: Side of the square left-eye image in pixels; the focal length stays 531 px (Table 1).
@@ -101,6 +101,10 @@ class EnvConfig:
     #: B robots in lockstep, each with its own stimulus, distance and pan; one coder and policy
     #: call serves all of them (beyond the paper, for speed; B = 1 is the paper's single robot).
     robots: int = 1
+    #: B robots take their turns in groups of this many (0: all B in one turn): each turn's
+    #: policy update and action come after the previous turn's, and its worlds render while the
+    #: later turns are encoded and act (beyond the paper; B ≤ this is one turn, the paper's order).
+    robots_per_turn: int = 4
     walk: WalkConfig = field(default_factory=WalkConfig)
 
 

@@ -183,6 +183,7 @@ def _env(check: _Checks) -> None:
     check.number("env.initial_pan_jitter_deg", at_least=0, below=90, what=" (degrees)")
     check.number("env.max_pan_increment_deg", above=0, below=90, what=" (degrees)")
     check.integer("env.robots", 1)
+    check.integer("env.robots_per_turn", 0, " (robots; 0: all in one turn)")
 
 
 def _coder(check: _Checks) -> None:

@@ -86,6 +86,7 @@ BAD_VALUES = [
     ("env.initial_pan_jitter_deg=nan", "env.initial_pan_jitter_deg=nan"),
     ("env.max_pan_increment_deg=0", "env.max_pan_increment_deg=0.0"),
     ("env.robots=0", "env.robots=0"),
+    ("env.robots_per_turn=-1", "env.robots_per_turn=-1"),
     ("env.stimuli.count=0", "env.stimuli.count=0"),
     ("env.stimuli.count=400", "env.stimuli.count=400"),
     ("env.stimuli.resolution=4", "env.stimuli.resolution=4"),

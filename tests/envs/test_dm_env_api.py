@@ -73,9 +73,11 @@ def test_environment_is_a_dm_control_environment():
 def test_shipped_config_maps_onto_load():
     cfg = OmegaConf.create(OmegaConf.to_container(compose().env))  # conf/env/hoap3.yaml
     kwargs = OmegaConf.to_container(cfg, resolve=True)
-    # `robots` is the trainer's (how many environments to make) and `walk` the body's walk
-    # (parallax.envs.walk): not arguments of load().
+    # `robots` and `robots_per_turn` are the experiment's (how many environments to make, and
+    # the order of their turns) and `walk` the body's walk (parallax.envs.walk): not arguments
+    # of load().
     assert kwargs.pop("robots") == 1
+    assert kwargs.pop("robots_per_turn") == 4
     assert kwargs.pop("walk")["growth_start_fraction"] is None
     assert (
         kwargs["image_size"] == 256 and kwargs["trial_length"] == 30 and kwargs["pan_reset"] is True
@@ -90,7 +92,7 @@ def test_shipped_config_maps_onto_load():
     env.close()
     # DictConfig / ListConfig values (not converted) work too.
     cfg.image_size, cfg.trial_length, cfg.stimuli.count = 32, 2, 3
-    del cfg["robots"], cfg["walk"]
+    del cfg["robots"], cfg["robots_per_turn"], cfg["walk"]
     env = parallax.envs.load(seed=0, lateral_positions=[0.05], **cfg)
     assert env.reset().observation["distance"] >= 3.0
     env.close()
