@@ -209,8 +209,9 @@ class PolicyConfig:
     #: each update (Bhatnagar et al. 2009); null: no projection, the weight decay λ bounds Θ.
     actor_projection_radius: float | None = None
     #: B robots in lockstep: in_turn (beyond the paper: their B updates one after the other, B
-    #: steps of algorithm 3) | mean (the mean of their updates from the same parameters, so B
-    #: robots teach as much as one). Either is algorithm 3 itself at env.robots=1.
+    #: steps of algorithm 3) | mean (the mean of their updates from the same parameters: the
+    #: robots of a turn, env.robots_per_turn, teach as much as one). Either is algorithm 3
+    #: itself at env.robots=1.
     robot_updates: str = "in_turn"
     #: Filled by the trainer: seeds the action-sampling generator.
     seed: int = MISSING
