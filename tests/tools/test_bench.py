@@ -94,7 +94,7 @@ def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
     assert "[ceiling cpu]" in printed and "cores busy" in printed
 
 
-@pytest.mark.parametrize("name", ["cpu_2core.json", "gpu_h100.json"])
+@pytest.mark.parametrize("name", ["cpu_2core.json", "cpu_2core_turns.json", "gpu_h100.json"])
 def test_show_prints_a_committed_report_without_measuring(name, capsys):
     """docs/performance.md quotes these files; --show prints their tables."""
     path = Path(__file__).resolve().parents[2] / "docs" / "results" / "bench" / name
@@ -122,3 +122,42 @@ def test_threads_are_told_apart_by_the_part_of_the_step_they_run():
         pass
     spent = seconds_between(before, cpu_seconds_by_role())
     assert 0.05 <= spent["main"] <= 0.5
+
+
+def test_also_adds_a_case_for_every_b_measured_in_the_same_run(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    bench.main(
+        [
+            "--no-components",
+            "--robots",
+            "2",
+            "--presentations",
+            "1",
+            "--also",
+            "env.robots_per_turn=1",
+            "--json",
+            str(out),
+        ]
+    )
+    printed = capsys.readouterr().out
+    report = json.loads(out.read_text())
+    assert report["also"] == ["env.robots_per_turn=1"]
+    cases = report["end_to_end"]["cpu"]
+    assert list(cases) == ["B=2", "B=2 env.robots_per_turn=1"]
+    for name, case in cases.items():
+        assert case["robots"] == 2 and case["steps_per_second"] > 0
+        # the bound of a lockstep of two robots, whichever setting the case adds
+        work = bench.coder_work_per_frame(compose(["curriculum=multi_5_10"]))
+        assert case["coder_bound_ms"] == bench.coder_bound_ms(work, report["roofline"]["cpu"], 2)
+        assert report["ceiling"]["cpu"][name]["measured_over_ceiling"] > 0
+        assert f"cpu {name:<6} {case['steps_per_second']:>8.1f} steps/s" in printed
+
+
+def test_a_bad_also_override_exits_2_naming_it_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    with pytest.raises(SystemExit) as exit_info:
+        bench.main(["--no-components", "--also", "env.robots_per_turn=-1", "--json", str(out)])
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err
+    assert "env.robots_per_turn" in error and "-1" in error
+    assert not out.exists()

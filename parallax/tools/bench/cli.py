@@ -47,8 +47,17 @@ from parallax.tools.bench.timing import cpu_seconds_by_role, seconds_between
 
 
 # --- end to end ----------------------------------------------------------------------------------
+def case_name(robots: int, also: str = "") -> str:
+    """The report's key of an end-to-end case: ``B=16``, or ``B=16 env.robots_per_turn=0``."""
+    return f"B={robots} {also}" if also else f"B={robots}"
+
+
 def end_to_end(
-    robots: Sequence[int], presentations: int, device: str, overrides: list[str]
+    robots: Sequence[int],
+    presentations: int,
+    device: str,
+    overrides: list[str],
+    also: Sequence[str] = (),
 ) -> dict[str, dict[str, float]]:
     """Robot-iterations per second of the whole loop for each B in ``robots``, twice: the
     experiment's presentation alone (render → retina → encode → policy → dictionary update) and
@@ -56,8 +65,10 @@ def end_to_end(
     and the metrics. The learner's queue is filled with synthetic vectors first, so that every s
     triggers a fit of full size.
 
-    The cases take turns, one presentation each per round, so that every B sees the same machine:
-    on a shared machine the speed moves by tens of per cent within minutes."""
+    Each override in ``also`` adds a case for every B with that override, so that two settings
+    (``env.robots_per_turn=0`` against the default, say) compare in one run. The cases take turns,
+    one presentation each per round, so that every case sees the same machine: on a shared
+    machine the speed moves by tens of per cent within minutes."""
     import tempfile
 
     import numpy as np
@@ -66,10 +77,13 @@ def end_to_end(
     from parallax.trainer import Trainer
 
     with contextlib.ExitStack() as stack:
-        trainers = {}
-        for b in robots:
+        trainers, robots_of = {}, {}
+        for extra, b in ((extra, b) for extra in ("", *also) for b in robots):
+            name = case_name(b, extra)
             trainer = Trainer(
-                compose([f"env.robots={b}", f"device={device}", *overrides]),
+                compose(
+                    [f"env.robots={b}", f"device={device}", *overrides, *([extra] if extra else [])]
+                ),
                 stack.enter_context(tempfile.TemporaryDirectory()),
             )
             stack.callback(trainer.exp.close)
@@ -81,9 +95,9 @@ def end_to_end(
             )
             learner.observe_batch(pans, distances)  # the first, long fit happens here, untimed
             trainer.step_presentation(keep_view=False)  # warm-up: first calls allocate and compile
-            trainers[b] = trainer
+            trainers[name], robots_of[name] = trainer, b
         samples = {
-            b: {
+            name: {
                 "rates": [],
                 "step_ms": [],
                 "trainer_rates": [],
@@ -91,11 +105,11 @@ def end_to_end(
                 "by_thread": [],
                 "loop": [],
             }
-            for b in robots
+            for name in trainers
         }
         for _ in range(presentations):
-            for b, trainer in trainers.items():
-                timed = samples[b]
+            for name, trainer in trainers.items():
+                b, timed = robots_of[name], samples[name]
                 threads = cpu_seconds_by_role()
                 t, cpu = time.perf_counter(), time.process_time()
                 pres = trainer.exp.run_presentation()
@@ -117,10 +131,11 @@ def end_to_end(
                 timed["trainer_rates"].append(pres.steps * b / (time.perf_counter() - t))
     cores = usable_cores()
     results = {}
-    for b, timed in samples.items():
+    for name, timed in samples.items():
         rates, cpu_ms = timed["rates"], timed["cpu_ms"]
         cpu_per_iteration = statistics.median(cpu_ms)
-        results[f"B={b}"] = {
+        results[name] = {
+            "robots": robots_of[name],
             "steps_per_second": statistics.median(rates),
             "lockstep_ms": statistics.median(timed["step_ms"]),
             "steps_per_second_min": min(rates),
@@ -153,11 +168,13 @@ def run(
     threads: int = 1,
     components: bool = True,
     config_overrides: Sequence[str] = (),
+    also: Sequence[str] = (),
 ) -> dict:
     torch.set_num_threads(threads)
     report: dict = {
         "threads": threads,
         "overrides": list(config_overrides),
+        "also": list(also),
         "torch": torch.__version__,
         "cuda": torch.cuda.is_available(),
     }
@@ -180,7 +197,7 @@ def run(
     overrides = ["curriculum=multi_5_10", f"train.threads={threads}", *config_overrides]
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     report["end_to_end"] = {
-        dev: end_to_end(robots, presentations, dev, overrides) for dev in devices
+        dev: end_to_end(robots, presentations, dev, overrides, also) for dev in devices
     }
     cfg = compose(overrides)
     work = coder_work_per_frame(cfg)
@@ -215,17 +232,13 @@ def run(
                 f"encode_update_both_B{batch}_ms"
             ] / coder_bound_ms(work, report["roofline"]["cuda"], batch)
     for dev, by_b in report["end_to_end"].items():
-        for b, r in by_b.items():
-            r["coder_bound_ms"] = coder_bound_ms(
-                work, report["roofline"][dev], int(b.split("=")[1])
-            )
+        for r in by_b.values():
+            r["coder_bound_ms"] = coder_bound_ms(work, report["roofline"][dev], r["robots"])
             r["step_over_coder_bound"] = r["lockstep_ms"] / r["coder_bound_ms"]
     cores, render_ms = usable_cores(), render_cpu_ms_per_frame()
     report["ceiling"] = {"cpu": {"cores": cores, "render_cpu_ms_per_frame": render_ms}}
     for b, r in report["end_to_end"]["cpu"].items():
-        ceiling = ceiling_steps_per_second(
-            render_ms, r["coder_bound_ms"], int(b.split("=")[1]), cores
-        )
+        ceiling = ceiling_steps_per_second(render_ms, r["coder_bound_ms"], r["robots"], cores)
         report["ceiling"]["cpu"][b] = {
             "steps_per_second": ceiling,
             "measured_over_ceiling": r["steps_per_second"] / ceiling,
@@ -339,6 +352,14 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument(
+        "--also",
+        action="append",
+        default=[],
+        metavar="OVERRIDE",
+        help="a Hydra override that adds an end-to-end case for every B, measured in turn with "
+        "the others (repeatable), e.g. --also env.robots_per_turn=0",
+    )
+    parser.add_argument(
         "overrides",
         nargs="*",
         help="Hydra overrides of the end-to-end cases (after curriculum=multi_5_10), e.g. "
@@ -364,10 +385,13 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(2)
     from parallax.config.overrides import composition_error
 
-    error = composition_error(["curriculum=multi_5_10", *args.overrides], check=True)
-    if error:
-        print(f"parallax-bench: error: {error}", file=sys.stderr)
-        sys.exit(2)
+    for extra in ("", *args.also):
+        error = composition_error(
+            ["curriculum=multi_5_10", *args.overrides, *([extra] if extra else [])], check=True
+        )
+        if error:
+            print(f"parallax-bench: error: {error}", file=sys.stderr)
+            sys.exit(2)
     robots = tuple(dict.fromkeys(args.robots))  # each B once, in the order given
     report = run(
         args.repeats,
@@ -376,6 +400,7 @@ def main(argv: list[str] | None = None) -> None:
         args.threads,
         not args.no_components,
         args.overrides,
+        tuple(dict.fromkeys(args.also)),
     )
     print(format_report(report))
     text = json.dumps(report, indent=2)
