@@ -144,10 +144,10 @@ def test_also_adds_a_case_for_every_b_measured_in_the_same_run(tmp_path, capsys)
     assert report["also"] == ["env.robots_per_turn=1"]
     cases = report["end_to_end"]["cpu"]
     assert list(cases) == ["B=2", "B=2 env.robots_per_turn=1"]
+    # the bound of a lockstep of two robots, whichever setting the case adds
+    work = bench.coder_work_per_frame(compose(["curriculum=multi_5_10"]))
     for name, case in cases.items():
         assert case["robots"] == 2 and case["steps_per_second"] > 0
-        # the bound of a lockstep of two robots, whichever setting the case adds
-        work = bench.coder_work_per_frame(compose(["curriculum=multi_5_10"]))
         assert case["coder_bound_ms"] == bench.coder_bound_ms(work, report["roofline"]["cpu"], 2)
         assert report["ceiling"]["cpu"][name]["measured_over_ceiling"] > 0
         assert f"cpu {name:<6} {case['steps_per_second']:>8.1f} steps/s" in printed

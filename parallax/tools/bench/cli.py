@@ -47,9 +47,14 @@ from parallax.tools.bench.timing import cpu_seconds_by_role, seconds_between
 
 
 # --- end to end ----------------------------------------------------------------------------------
-def case_name(robots: int, also: str = "") -> str:
+def settings(also: Sequence[str]) -> list[list[str]]:
+    """The end-to-end cases' extra overrides: none (the plain case), then each of ``also``."""
+    return [[], *([override] for override in also)]
+
+
+def case_name(robots: int, extra: Sequence[str]) -> str:
     """The report's key of an end-to-end case: ``B=16``, or ``B=16 env.robots_per_turn=0``."""
-    return f"B={robots} {also}" if also else f"B={robots}"
+    return " ".join([f"B={robots}", *extra])
 
 
 def end_to_end(
@@ -77,13 +82,10 @@ def end_to_end(
     from parallax.trainer import Trainer
 
     with contextlib.ExitStack() as stack:
-        trainers, robots_of = {}, {}
-        for extra, b in ((extra, b) for extra in ("", *also) for b in robots):
-            name = case_name(b, extra)
+        cases = {}  # name → (B, its trainer)
+        for extra, b in ((extra, b) for extra in settings(also) for b in robots):
             trainer = Trainer(
-                compose(
-                    [f"env.robots={b}", f"device={device}", *overrides, *([extra] if extra else [])]
-                ),
+                compose([f"env.robots={b}", f"device={device}", *overrides, *extra]),
                 stack.enter_context(tempfile.TemporaryDirectory()),
             )
             stack.callback(trainer.exp.close)
@@ -95,7 +97,7 @@ def end_to_end(
             )
             learner.observe_batch(pans, distances)  # the first, long fit happens here, untimed
             trainer.step_presentation(keep_view=False)  # warm-up: first calls allocate and compile
-            trainers[name], robots_of[name] = trainer, b
+            cases[case_name(b, extra)] = b, trainer
         samples = {
             name: {
                 "rates": [],
@@ -105,11 +107,11 @@ def end_to_end(
                 "by_thread": [],
                 "loop": [],
             }
-            for name in trainers
+            for name in cases
         }
         for _ in range(presentations):
-            for name, trainer in trainers.items():
-                b, timed = robots_of[name], samples[name]
+            for name, (b, trainer) in cases.items():
+                timed = samples[name]
                 threads = cpu_seconds_by_role()
                 t, cpu = time.perf_counter(), time.process_time()
                 pres = trainer.exp.run_presentation()
@@ -135,7 +137,7 @@ def end_to_end(
         rates, cpu_ms = timed["rates"], timed["cpu_ms"]
         cpu_per_iteration = statistics.median(cpu_ms)
         results[name] = {
-            "robots": robots_of[name],
+            "robots": cases[name][0],
             "steps_per_second": statistics.median(rates),
             "lockstep_ms": statistics.median(timed["step_ms"]),
             "steps_per_second_min": min(rates),
@@ -385,10 +387,8 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(2)
     from parallax.config.overrides import composition_error
 
-    for extra in ("", *args.also):
-        error = composition_error(
-            ["curriculum=multi_5_10", *args.overrides, *([extra] if extra else [])], check=True
-        )
+    for extra in settings(args.also):
+        error = composition_error(["curriculum=multi_5_10", *args.overrides, *extra], check=True)
         if error:
             print(f"parallax-bench: error: {error}", file=sys.stderr)
             sys.exit(2)
