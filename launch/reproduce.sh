@@ -1,31 +1,36 @@
 #!/usr/bin/env bash
 # Reproduces the results report (docs/results/): every experiment of a family for every seed,
 # parallax-eval of each multiple-position model before and after the perturbation, the 5–20 cm
-# models of recipe and paper kept in docs/results/checkpoints/<experiment>_seed<n> (committed), and
-# the reports. A family is a prefix of the experiment files in conf/experiment/:
-#     bash launch/reproduce.sh                      # recipe, paper and without, then the report
-#     bash launch/reproduce.sh paper                # the paper's algorithm as written (paper_*)
-#     bash launch/reproduce.sh recipe               # ours (recipe_*)
-#     bash launch/reproduce.sh without              # the recipe less each improvement (without_*)
+# models of every family but without kept in docs/results/checkpoints/<experiment>_seed<n>
+# (committed), and the reports. A family is a prefix of the experiment files in conf/experiment/
+# (<family>_algorithm.yaml, the settings its files include, is not an experiment of its own):
+#     bash launch/reproduce.sh              # recipe, paper, unsourced and without, then the report
+#     bash launch/reproduce.sh recipe       # ours (recipe_*)
+#     bash launch/reproduce.sh paper        # the paper's algorithm, its open settings from its
+#                                           # lineage (paper_*)
+#     bash launch/reproduce.sh unsourced    # the paper's algorithm, its open settings chosen by
+#                                           # us (unsourced_*)
+#     bash launch/reproduce.sh without      # the recipe less each improvement (without_*)
 # Each run is `parallax-train experiment=<name> seed=<n>`; nothing is added here. An experiment
 # that differs from another only in the distance learner (python -m parallax.tools.experiments)
 # is not trained: parallax-replay of the other's runs gives exactly its results.
-# Seeds: SEEDS (default 0,1,2); the 5–20 cm experiments of recipe and paper, the headline rows,
-# HEADLINE_SEEDS (default 0,1,2,3,4).
+# Seeds: SEEDS (default 0,1,2); the 5–20 cm experiments of every family but without, the headline
+# rows, HEADLINE_SEEDS (default 0,1,2,3,4).
 # Arguments with '=' are Hydra overrides for every run (e.g. train.presentations=20 for a
 # smoke test); the others name families.
 # Resumable: each family's runs live in a fixed folder, $RECORD_ROOT/<family> (default
-# docs/results/runs/<family>, committed without checkpoints and TensorBoard files). A run with a
-# summary.json is finished and is not trained again, checkpoint or not; an unfinished one
-# continues from its checkpoint; a model is evaluated again only when its checkpoint is newer
-# than its eval. Extra settings: launch/ablation_lib.sh (LAUNCHER, N_JOBS, RECORD_ROOT,
+# docs/results/runs/<family>, committed without checkpoints, TensorBoard files and figures, the
+# finished runs' metrics.jsonl and eval.json compressed by python -m parallax.tools.report.compact
+# before the report, which reads them so). A run with a summary.json is finished and is not trained
+# again, checkpoint or not; an unfinished one continues from its checkpoint; a model is evaluated
+# again only when its checkpoint is newer than its eval. Extra settings: launch/ablation_lib.sh (LAUNCHER, N_JOBS, RECORD_ROOT,
 # REPORT_ROOT, PARALLAX_DRY_RUN), plus
 #   EVAL_ARGS   parallax-eval options of every model (default: the greedy eye on held-out
 #               photographs, one per distance of the grid 3.0, 3.1, …, 10.0 m, and 35 distances
 #               between its points)
 #   WITHOUT_ARGS  the same for the without family (default: the grid only)
 #   OTHER_ARGS  parallax-eval options for textures of another kind (default: the grid 3.0, 3.2,
-#               …, 10.0 m, greedy only), on the recipe's and the paper's 5–20 cm models
+#               …, 10.0 m, greedy only), on the 5–20 cm models of every family but without
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
@@ -34,7 +39,7 @@ for arg in "$@"; do
   if [[ "$arg" == *=* ]]; then overrides+=("$arg"); else families+=("$arg"); fi
 done
 if (( ${#families[@]} == 0 )); then
-  families=(recipe paper without)
+  families=(recipe paper unsourced without)
 fi
 read -ra eval_args <<< "${EVAL_ARGS:---robots 16 --greedy-only --between $(LC_ALL=C seq -s ' ' -f '%.2f' 3.05 0.2 9.85)}"
 # the recipe less an improvement: the grid alone
@@ -62,12 +67,20 @@ other_kinds=(
 
 status=0
 evals=()  # one parallax-eval command line each, run N_JOBS at a time
+eval_record() {  # OUT: prints OUT/eval.json, or its compressed form (a committed record), if any
+  local file
+  for file in "$1/eval.json" "$1/eval.json.xz" "$1/eval.json.gz"; do
+    [[ -f "$file" ]] && { printf '%s\n' "$file"; return 0; }
+  done
+  return 1
+}
 eval_due() {  # MODEL CHECKPOINT OUT: the checkpoint exists and OUT/eval.json is missing, or older
   # than the run's own checkpoint (a committed copy's date is the checkout's: only when missing)
-  local model="$1" ckpt="$2" out="$3"
+  local model="$1" ckpt="$2" out="$3" record
   [[ -n "${PARALLAX_DRY_RUN:-}" ]] && return 0
   [[ -f "$model/$ckpt" ]] || return 1
-  [[ ! -f "$out/eval.json" ]] || [[ "$out" == "$model"* && "$model/$ckpt" -nt "$out/eval.json" ]]
+  record="$(eval_record "$out")" || return 0
+  [[ "$out" == "$model"* && "$model/$ckpt" -nt "$record" ]]
 }
 queue_eval() {  # MODEL CHECKPOINT OUT ARGS...: queue an eval unless OUT/eval.json is up to date;
   # ARGS may start with env.stimuli.KEY=VALUE settings, which go right after MODEL
@@ -185,8 +198,8 @@ for family in "${families[@]}"; do
   names=()
   for file in conf/experiment/"${family}"_*.yaml; do
     name="$(basename "$file" .yaml)"
-    # paper_algorithm.yaml holds the paper's settings that the paper_<setup> files include
-    [[ "$name" == paper_algorithm || ! -f "$file" ]] || names+=("$name")
+    # <family>_algorithm.yaml holds the settings that the family's <setup> files include
+    [[ "$name" == *_algorithm || ! -f "$file" ]] || names+=("$name")
   done
   if (( ${#names[@]} == 0 )); then
     echo "launch/reproduce.sh: no experiment files conf/experiment/${family}_*.yaml" >&2
@@ -238,6 +251,13 @@ for family in "${families[@]}"; do
   fi
   sources=("$sweep")
   [[ -d "$replays" || -n "${PARALLAX_DRY_RUN:-}" ]] && sources+=("$replays")
+  if [[ -z "${PARALLAX_DRY_RUN:-}" ]] && ! compgen -G "$sweep/*/summary.json" > /dev/null; then
+    echo "[reproduce] no finished runs in $sweep: no report for $family" >&2
+    status=1
+    continue
+  fi
+  # the records as they are committed: the finished runs' metrics.jsonl and eval.json compressed
+  px_run python -m parallax.tools.report.compact "${sources[@]}" || status=$?
   if [[ "$family" == without ]]; then
     px_run python -m parallax.tools.report.leave_one_out "${sources[@]}" \
       "$(px_record_dir recipe)" --out "$report_root" "${notes[@]}" || status=$?
@@ -251,21 +271,22 @@ done
 mapfile -t headline_runs < <(px_runs_with "$(px_record_dir recipe)" experiment=recipe_multi_5_20_weighted)
 eval_dirs=()
 for run in "${headline_runs[@]}"; do
-  [[ -f "$run/eval_before/eval.json" ]] && eval_dirs+=("$run/eval_before")
+  eval_record "$run/eval_before" > /dev/null && eval_dirs+=("$run/eval_before")
 done
 for run in "${headline_runs[@]}"; do
-  [[ -f "$run/eval.json" ]] && eval_dirs+=("$run")
+  eval_record "$run" > /dev/null && eval_dirs+=("$run")
 done
 if (( ${#eval_dirs[@]} )); then
   px_run python -m parallax.tools.analysis.eye_bound "${eval_dirs[@]}" \
     --json "$report_root/eye_bound.json" || status=$?
 fi
 
-# the three columns: the paper's numbers, the paper's algorithm in parallax, ours
-if [[ -f "$report_root/paper.json" && -f "$report_root/recipe.json" ]] || [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
+# the three columns: the paper's numbers, the paper's algorithm with its open settings chosen by
+# us (unsourced), ours
+if [[ -f "$report_root/unsourced.json" && -f "$report_root/recipe.json" ]] || [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
   notes=()
   [[ -f "$report_root/notes.md" ]] && notes=(--notes "$report_root/notes.md")
-  px_run python -m parallax.tools.report.compare "$report_root/paper.json" \
+  px_run python -m parallax.tools.report.compare "$report_root/unsourced.json" \
     "$report_root/recipe.json" --out "$report_root" --readme README.md "${notes[@]}" || status=$?
 fi
 exit "$status"

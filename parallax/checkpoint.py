@@ -3,7 +3,14 @@
 A checkpoint is written at a presentation boundary, where the world holds no state but its
 random generator (the next reset draws the next stimulus), so restoring it continues the same
 sequence of numbers. Writing goes to a temporary file in the same directory, then `os.replace`,
-so a kill at any moment leaves either the old or the new checkpoint, never half of one.
+so a kill at any moment leaves either the old or the new checkpoint, never half of one. The
+trainer keeps the checkpoint before the latest one too (``checkpoint_previous.pt``): a file can
+still be damaged after it was written (a full disk, an interrupted copy), and a run whose latest
+checkpoint is damaged resumes from the one before (``train.resume_from=previous``).
+
+:func:`read` is the one way in: a file that is not a whole checkpoint of this run raises
+:class:`CheckpointError`, whose message names the file and what is wrong with it, before anything
+is loaded into a model.
 """
 
 from __future__ import annotations
@@ -11,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import os
 import random
+import shutil
 import signal
 import tempfile
 import threading
@@ -21,6 +29,8 @@ import numpy as np
 import torch
 
 CHECKPOINT_NAME = "checkpoint.pt"
+#: The checkpoint written before the latest one (the trainer keeps it; see the module docstring).
+PREVIOUS_NAME = "checkpoint_previous.pt"
 #: Written once, when the §5 perturbation is switched on: the state learnt before it.
 BEFORE_PERTURBATION_NAME = "checkpoint_before_perturbation.pt"
 
@@ -58,7 +68,12 @@ def _signals_deferred():
             signal.raise_signal(signum)
 
 
-def save_atomic(state: dict[str, Any], path: str | Path) -> None:
+def save_atomic(
+    state: dict[str, Any], path: str | Path, previous: str | Path | None = None
+) -> None:
+    """Write ``state`` to ``path`` atomically; with ``previous``, the file ``path`` held until
+    now becomes ``previous`` first (atomically too), so that at every moment ``path`` is a whole
+    checkpoint and ``previous`` the one before it (or, between the two renames, the same)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with _signals_deferred():
@@ -68,16 +83,114 @@ def save_atomic(state: dict[str, Any], path: str | Path) -> None:
                 torch.save(state, f)
                 f.flush()
                 os.fsync(f.fileno())
+            if previous is not None and path.exists():
+                _keep_as(path, Path(previous))
             os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise
 
 
+def _keep_as(path: Path, previous: Path) -> None:
+    """``previous`` becomes the file at ``path``: a hard link (no copy), or a copy on file
+    systems without links, put in place by a rename."""
+    fd, tmp = tempfile.mkstemp(prefix=previous.name + ".", suffix=".tmp", dir=previous.parent)
+    os.close(fd)
+    try:
+        os.unlink(tmp)  # os.link needs a free name; mkstemp only reserved a unique one
+        try:
+            os.link(path, tmp)
+        except OSError:
+            shutil.copyfile(path, tmp)
+        os.replace(tmp, previous)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def load(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
     # weights_only=False: the checkpoint holds numpy RNG states and plain Python containers
     # that we wrote ourselves.
     return torch.load(Path(path), map_location=map_location, weights_only=False)
+
+
+#: What every checkpoint of parallax-train holds at its top level.
+REQUIRED_KEYS = (
+    "presentation",
+    "steps",
+    "wall_time",
+    "experiment",
+    "eye",
+    "dist",
+    "before_perturbation",
+    "last_distance_stats",
+    "global_rng",
+)
+#: The first bytes of a zip archive, torch.save's format.
+_ZIP_MAGIC = b"PK\x03\x04"
+
+
+def describe(exc: BaseException) -> str:
+    """``Type: first sentence`` of an error from torch or pickle (torch's run on for lines)."""
+    text = str(exc).strip()
+    return (
+        f"{type(exc).__name__}: {text.splitlines()[0].split('. ')[0]}"
+        if text
+        else type(exc).__name__
+    )
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be used: ``<path> <what is wrong>``. The commands add what to do."""
+
+    def __init__(self, path: str | Path, problem: str):
+        super().__init__(f"{path} {problem}")
+        self.path, self.problem = Path(path), problem
+
+    def __reduce__(self):
+        return (type(self), (self.path, self.problem))
+
+
+def read(
+    path: str | Path, config: Any = None, map_location: str | torch.device = "cpu"
+) -> dict[str, Any]:
+    """The checkpoint at ``path``, checked: a whole torch file holding a dict with every key of
+    :data:`REQUIRED_KEYS` and, when it records the settings it was trained with and ``config``
+    (a composed config) is given, written with the same ones (the changes a resume may make
+    aside). Anything else raises :class:`CheckpointError`."""
+    from omegaconf import OmegaConf
+
+    from parallax.config import changed_settings
+
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        with path.open("rb") as f:
+            head = f.read(len(_ZIP_MAGIC))
+    except OSError as exc:
+        raise CheckpointError(path, f"cannot be read ({exc.strerror or exc})") from None
+    if size == 0:
+        raise CheckpointError(path, "is empty")
+    try:
+        state = load(path, map_location=map_location)
+    except Exception as exc:  # pickle and torch's zip reader raise many kinds for a broken file
+        kind = "is truncated or damaged" if head == _ZIP_MAGIC else "is not a torch checkpoint"
+        raise CheckpointError(path, f"{kind} ({size} bytes; {describe(exc)})") from None
+    if not isinstance(state, dict):
+        raise CheckpointError(
+            path, f"is not a checkpoint of parallax-train (it holds a {type(state).__name__})"
+        )
+    missing = [key for key in REQUIRED_KEYS if key not in state]
+    if missing:
+        raise CheckpointError(
+            path, f"lacks {', '.join(missing)} (not a checkpoint of parallax-train)"
+        )
+    if config is not None and isinstance(state.get("config"), dict):
+        changed = changed_settings(OmegaConf.create(state["config"]), config)
+        if changed:
+            listed = "; ".join(changed[:2]) + ("; …" if len(changed) > 2 else "")
+            raise CheckpointError(path, f"was written by a run with other settings ({listed})")
+    return state
 
 
 def global_rng_state() -> dict[str, Any]:

@@ -8,8 +8,12 @@ Tables 4–5). Everything a run writes lives in its run directory:
     tb/               TensorBoard events
     metrics.jsonl     one line per presentation (deterministic: no wall-clock values), with the
                       eye-movement vectors s the distance learner saw (for parallax-replay)
-    checkpoint.pt     the latest checkpoint (atomic)
+    checkpoint.pt     the latest checkpoint (atomic), and checkpoint_previous.pt the one before
     summary.json      the final summary (and the one before the perturbation)
+
+After each presentation :mod:`parallax.health` reads its record: a diverging critic is named
+once, and numbers that stopped being finite hold back the checkpoints and, in the end, stop the
+run with :class:`parallax.health.Diverged`.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from parallax.config import (
     start_jitter_on,
 )
 from parallax.experiment import Experiment, Presentation
+from parallax.health import Diverged, Health
 from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, learn_online, position_label
 
 
@@ -58,11 +63,28 @@ class Trainer:
         self.last_distance_stats: dict[str, float] = {}
         self.perturbation_start = perturbation_start(cfg)
         self.growth_start = growth_start(cfg)
+        self.health = Health(cfg.train.critic_scale_warning, cfg.train.stop_after_non_finite)
+        self.distance_fitted = False  # whether the distance learner fitted in this presentation
+        # A run resumed from checkpoint_previous.pt keeps it as the previous one: the latest
+        # checkpoint, which it was resumed instead of, may be the damaged one.
+        self.keep_latest = True
+        # the last checkpoint written or resumed from, and its presentation
+        self.saved: tuple[Path, int] | None = None
 
     # --- paths -----------------------------------------------------------------------------
     @property
     def checkpoint_path(self) -> Path:
         return self.run_dir / checkpoint.CHECKPOINT_NAME
+
+    @property
+    def previous_path(self) -> Path:
+        return self.run_dir / checkpoint.PREVIOUS_NAME
+
+    @property
+    def resume_path(self) -> Path:
+        """The checkpoint a resumed run continues from (train.resume_from)."""
+        latest = str(self.cfg.train.resume_from) == "latest"
+        return self.checkpoint_path if latest else self.previous_path
 
     @property
     def metrics_path(self) -> Path:
@@ -85,28 +107,44 @@ class Trainer:
             "last_distance_stats": self.last_distance_stats,
             "global_rng": checkpoint.global_rng_state(),
             **({"route_dist": self.route_dist.state_dict()} if self.exp.planner else {}),
+            # the settings it was trained with, so that it is never resumed or evaluated as
+            # another run's (checkpoint.read)
+            "config": OmegaConf.to_container(self.cfg, resolve=True),
+            "health": self.health.state_dict(),
         }
 
     def save(self) -> None:
-        checkpoint.save_atomic(self.state_dict(), self.checkpoint_path)
+        previous = self.previous_path if self.keep_latest else None
+        checkpoint.save_atomic(self.state_dict(), self.checkpoint_path, previous=previous)
+        self.keep_latest, self.saved = True, (self.checkpoint_path, self.presentation)
 
     def restore(self) -> bool:
-        """Continue from the run directory's checkpoint, if any; drop log lines written after it."""
-        if not self.checkpoint_path.exists():
+        """Continue from the checkpoint of train.resume_from, if there is one; drop log lines
+        written after it. A checkpoint that cannot be used raises checkpoint.CheckpointError."""
+        path = self.resume_path
+        if not path.exists():
             return False
-        state = checkpoint.load(
-            self.checkpoint_path, map_location="cpu"
-        )  # load_state_dict copies onto the run's device
-        self.exp.load_state_dict(state["experiment"])
-        self.eye.load_state_dict(state["eye"])
-        self.dist.load_state_dict(state["dist"])
+        # map_location=cpu: load_state_dict copies onto the run's device
+        state = checkpoint.read(path, config=self.cfg, map_location="cpu")
+        try:
+            self.exp.load_state_dict(state["experiment"])
+            self.eye.load_state_dict(state["eye"])
+            self.dist.load_state_dict(state["dist"])
+            if self.exp.planner is not None:
+                self.route_dist.load_state_dict(state["route_dist"])
+            if state.get("health") is not None:
+                self.health.load_state_dict(state["health"])
+        except (KeyError, RuntimeError, TypeError, ValueError, IndexError) as exc:
+            # written by another version of parallax or another experiment: its parts do not fit
+            raise checkpoint.CheckpointError(
+                path, f"does not fit this run's models ({checkpoint.describe(exc)})"
+            ) from None
         self.presentation, self.steps = int(state["presentation"]), int(state["steps"])
         self.wall_time = float(state["wall_time"])
         self.before_perturbation = state["before_perturbation"]
         self.last_distance_stats = state["last_distance_stats"]
-        if self.exp.planner is not None:
-            self.route_dist.load_state_dict(state["route_dist"])
         checkpoint.set_global_rng_state(state["global_rng"])
+        self.keep_latest, self.saved = path == self.checkpoint_path, (path, self.presentation)
         if self.metrics_path.exists():
             kept = [
                 line
@@ -144,6 +182,7 @@ class Trainer:
             stats = learn_online(self.exp.distance, self.dist, pans, pres.distances)
         if stats:
             self.last_distance_stats = stats
+        self.distance_fitted = bool(stats.get("trained"))
         return walked
 
     def _route_record(self, pres: Presentation, key: str, learnt_distance: bool) -> dict:
@@ -189,6 +228,7 @@ class Trainer:
                 self.eye.record(pres.labels[p], pres.pans[b, p], pres.targets[b, p])
         learnt_distance = self.exp.on_final_list
         walked = moved = {}
+        self.distance_fitted = False
         if learnt_distance and pres.route is None:
             walked = self._learn_distance(pres)
             if self.exp.planner is not None:  # a full sweep: the planner's queue learns it
@@ -316,6 +356,11 @@ class Trainer:
         if pres.last_view is not None:
             writer.add_image("world/I0_beside_It", pres.last_view, self.steps, dataformats="HWC")
 
+    def skipped_updates(self) -> int:
+        """The policy's running count of updates it skipped as not finite (0 if it keeps none)."""
+        count = getattr(self.exp.policy, "rejected_updates", None)
+        return 0 if count is None else int(count)
+
     def fit(self) -> dict:
         cfg = self.cfg
         total = int(cfg.train.presentations)
@@ -327,6 +372,7 @@ class Trainer:
         if self.perturbed:
             self.exp.set_perturbation(True)
         self.exp.set_growth(self.grown)
+        self.health.skipped_seen = self.skipped_updates()
         writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.steps if resumed else None)
         if not resumed:
             writer.add_text("config", "```yaml\n" + OmegaConf.to_yaml(cfg) + "\n```", 0)
@@ -365,6 +411,8 @@ class Trainer:
                     log.write(json.dumps(record) + "\n")
                     log.flush()
                     self._log_scalars(writer, record, sps)
+                    skipped = self.skipped_updates()
+                    self.health.report(record, skipped, self.distance_fitted, writer, self.steps)
                     if keep_view:
                         self._log_images(writer, pres)
                     dist_total = record["distance_error"].get("total")
@@ -385,7 +433,13 @@ class Trainer:
                             + (f"{dist_total:.2f}%" if dist_total is not None else "-"),
                             flush=True,
                         )
-                    if (
+                    if self.health.must_stop:
+                        message = self.health.stop_message(self.presentation, self.saved)
+                        writer.add_text("health", message, self.steps)
+                        raise Diverged(message)
+                    # while the numbers are not finite, the last checkpoint stays the last good one
+                    holding = not self.health.healthy and self.health.stop_after is not None
+                    if not holding and (
                         self.presentation % int(cfg.train.checkpoint_every) == 0
                         or self.presentation == total
                     ):

@@ -253,8 +253,9 @@ def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path):
         assert "seed=0\\,1\\,2" in line and line.rstrip().endswith("train.presentations=7")
         assert f"hydra.sweep.dir={tmp_path}/" in line
     report = [l for l in lines if l.startswith("parallax-report ")]
-    # reproduce.sh: one report per family with the paper's tables (its own test below)
-    assert len(report) == (2 if script == "reproduce.sh" else 1)
+    # reproduce.sh: one report per family with the paper's tables, recipe, paper and unsourced
+    # (its own test below)
+    assert len(report) == (3 if script == "reproduce.sh" else 1)
     assert all("--out docs/results" in line for line in report)
 
 
@@ -263,13 +264,20 @@ def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_fil
     trained = " ".join(l for l in lines if l.startswith("parallax-train -m "))
     replayed = [l for l in lines if l.startswith("parallax-replay ")]
     # the rows without weighting, and the recipe less a distance-side improvement, are replays
-    for name in ("recipe_multi_5_20", "paper_multi_5_20", "without_lm_weight_decay"):
+    for name in (
+        "recipe_multi_5_20",
+        "paper_multi_5_20",
+        "unsourced_multi_5_20",
+        "without_lm_weight_decay",
+    ):
         assert f"experiment={name}\\," not in trained and f"\\,{name}\\," not in trained
         assert any(f"_replays/{name} " in l for l in replayed), name
     assert "without_reward_change" in trained and "recipe_multi_5_20_weighted" in trained
     # five seeds for the 5–20 cm headline rows, three elsewhere
     headline = [l for l in lines if l.startswith("parallax-train -m ") and "0\\,1\\,2\\,3\\,4" in l]
-    assert len(headline) == 2 and all("multi_5_20_weighted seed=" in l for l in headline)
+    assert len(headline) == 3 and all("multi_5_20_weighted seed=" in l for l in headline)
+    # a family's <family>_algorithm.yaml is the settings its files include, not an experiment
+    assert "_algorithm" not in trained
     evals = [l for l in lines if l.startswith("parallax-eval ")]
     assert evals and all("--robots 16" in l for l in evals)
     # every printed eval is a command line that parallax-eval's own parser takes

@@ -21,7 +21,7 @@ from . import native, reference
 from .pursuit import SparseCode
 
 #: Atoms are divided by max(‖φ‖, this); a gradient step never comes close to zeroing an atom.
-_MIN_ATOM_NORM = 1e-12
+MIN_ATOM_NORM = 1e-12
 
 
 def random_dictionary(
@@ -38,7 +38,7 @@ def random_dictionary(
 
 def normalise_atoms_(dictionary: torch.Tensor) -> torch.Tensor:
     """Scale every row to unit norm, in place."""
-    norms = torch.linalg.vector_norm(dictionary, dim=1, keepdim=True).clamp_min_(_MIN_ATOM_NORM)
+    norms = torch.linalg.vector_norm(dictionary, dim=1, keepdim=True).clamp_min_(MIN_ATOM_NORM)
     return dictionary.div_(norms)
 
 
@@ -129,7 +129,7 @@ def gradient_step_and_gram_(
         [chunk.coefficients for chunk in chunks],
         [chunk.residuals for chunk in chunks],
         step,
-        _MIN_ATOM_NORM,
+        MIN_ATOM_NORM,
     )
 
 

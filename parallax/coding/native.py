@@ -10,8 +10,8 @@ and ``encode_pairs`` (one scale's whole encoding in one call, likewise).
 :func:`load_kernels` builds the C++ file on first use with ``torch.utils.cpp_extension.load``
 (-O3; needs a C++ compiler and the ``ninja`` package; torch caches the build under
 ``~/.cache/torch_extensions`` or ``$TORCH_EXTENSIONS_DIR``, so later processes only load it),
-then checks once that all of them reproduce the numpy/torch code of
-:mod:`parallax.coding.reference` bit for bit on random data.
+then checks once that all of them reproduce the numpy/torch code bit for bit on random data
+(:mod:`parallax.coding.native_check`, registered by the package with :func:`set_self_check`).
 It returns the module, or ``None`` — with one warning line saying why — when the kernels cannot
 be built or disagree.
 
@@ -28,13 +28,11 @@ import contextlib
 import logging
 import os
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
 
 import torch
-
-from . import reference
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +49,7 @@ _load_lock = threading.Lock()
 _loaded = False
 _module: ModuleType | None = None
 _failure: str | None = None
+_self_check: Callable[[ModuleType], None] | None = None
 
 
 def kernel_choice() -> str:
@@ -119,94 +118,13 @@ def _exclusive(path: Path) -> Iterator[None]:
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
-def _self_check(module: ModuleType) -> None:
-    """The kernels must give the numpy/torch code's results exactly, in both dtypes."""
-    generator = torch.Generator().manual_seed(0)
-    for dtype in (torch.float32, torch.float64):
-        for atoms in (40, 37, 75):  # whole vector lanes only, and a tail after them (short, long)
-            dictionary = torch.randn(atoms, 12, generator=generator, dtype=dtype)
-            dictionary /= dictionary.norm(dim=1, keepdim=True)
-            patches = torch.randn(64, 12, generator=generator, dtype=dtype)
-            correlations = patches @ dictionary.T
-            gram = dictionary @ dictionary.T
-            picks, coefficients = reference.gram_steps_cpu(correlations.clone(), gram, 8)
-            codes, residuals = reference.codes_and_residuals(
-                patches, dictionary, picks, coefficients
-            )
-            got_picks, got_coefficients = module.gram_pursuit(correlations.clone(), gram, 8)
-            got_codes, got_residuals = module.codes_and_residuals(
-                patches, dictionary, picks, coefficients
-            )
-            for name, mine, theirs in (
-                ("picks", got_picks, picks),
-                ("coefficients", got_coefficients, coefficients),
-                ("codes", got_codes, codes),
-                ("residuals", got_residuals, residuals),
-                (
-                    "residuals alone",
-                    module.residuals_only(patches, dictionary, picks, coefficients),
-                    residuals,
-                ),
-                (
-                    "B^T R",
-                    module.codes_times_residuals(picks, coefficients, residuals, atoms),
-                    reference.codes_times_residuals(picks, coefficients, residuals, atoms),
-                ),
-                *_dictionary_step_pairs(module, dictionary, picks, coefficients, codes, residuals),
-                *_encode_pairs_pairs(module, dictionary, gram, generator),
-            ):
-                if not torch.equal(mine, theirs):
-                    raise RuntimeError(
-                        f"its {dtype} {name} differ from the numpy/torch code's on this machine"
-                    )
-
-
-def _dictionary_step_pairs(module, dictionary, picks, coefficients, codes, residuals) -> list:
-    """(name, the kernel's, the numpy/torch code's) for the one-call dictionary step and its
-    Gram matrix."""
-    from .dictionary import _MIN_ATOM_NORM, gradient_step_
-    from .pursuit import SparseCode, gram_matrix
-
-    expected, stepped = dictionary.clone(), dictionary.clone()
-    gradient_step_(expected, SparseCode(picks, coefficients, codes, residuals), 0.1, "torch")
-    gram = module.dictionary_step(
-        stepped, [picks], [coefficients], [residuals], 0.1 / residuals.shape[0], _MIN_ATOM_NORM
-    )
-    return [("dictionary step", stepped, expected), ("Gram matrix", gram, gram_matrix(expected))]
-
-
-def _encode_pairs_pairs(module, dictionary, gram, generator) -> list:
-    """(name, the kernel's, the numpy/torch code's) for the one-call encoding of a scale, in both
-    normalisations (θ from the picks is compared with the θ kernel, which the coder checks per
-    shape against torch)."""
-    from .dictionary import reconstruction_error
-    from .retina import NEAR_CONSTANT_TOLERANCE, prepare_reference, stack_pair
-
-    half = dictionary.shape[1] // 2
-    raw_reference, raw = torch.randn(2, 2, 9, half, generator=generator, dtype=dictionary.dtype)
-    pairs_checked = []
-    for normalisation in ("per_half", "joint"):
-        cached = prepare_reference(raw_reference, normalisation)
-        pairs = stack_pair(cached, raw, normalisation)
-        flat = pairs.reshape(18, 2 * half)
-        picks, coefficients = reference.gram_steps_cpu(flat @ dictionary.T, gram, 5)
-        _, residuals = reference.codes_and_residuals(flat, dictionary, picks, coefficients)
-        expected = (
-            picks,
-            coefficients,
-            residuals,
-            module.pooled_activity(picks, coefficients, 9, dictionary.shape[0]),
-            reconstruction_error(pairs, residuals.reshape(2, 9, 2 * half)),
-        )
-        got = module.encode_pairs(
-            cached, raw, dictionary, gram, 5, normalisation == "per_half", NEAR_CONSTANT_TOLERANCE
-        )
-        names = ("picks", "coefficients", "residuals", "theta", "e")
-        pairs_checked += [
-            (f"one-call encoding's {name} ({normalisation})", mine, theirs)
-            for name, mine, theirs in zip(names, got, expected)
-        ]
-    return pairs_checked
+def set_self_check(check: Callable[[ModuleType], None]) -> None:
+    """Registers the check :func:`load_kernels` runs on the built module before handing it out:
+    it raises where the kernels disagree with the numpy/torch code. The package registers
+    :func:`parallax.coding.native_check.self_check` when it is imported (that check runs the
+    dictionary and pursuit code, which use this module)."""
+    global _self_check
+    _self_check = check
 
 
 def load_kernels() -> ModuleType | None:
@@ -217,6 +135,8 @@ def load_kernels() -> ModuleType | None:
     with _load_lock:
         if not _loaded:
             try:
+                if _self_check is None:
+                    raise RuntimeError("no self-check is registered (import parallax.coding)")
                 module = _build()
                 _self_check(module)
                 _module = module

@@ -1,9 +1,9 @@
 """The sparse coder's inner loops in numpy/torch (paper §3.3, eq. 1 and the dictionary step).
 
 These are the definitions the compiled CPU kernels of ``pursuit_kernel.cpp`` must reproduce bit
-for bit (:mod:`parallax.coding.native` checks them against these functions before the coder uses
-them), and the code that runs wherever the kernels do not: without a C++ compiler, on other
-devices, in other dtypes. Each function works on plain tensors and mirrors one kernel:
+for bit (:mod:`parallax.coding.native_check` checks them against these functions before the
+coder uses them), and the code that runs wherever the kernels do not: without a C++ compiler,
+on other devices, in other dtypes. Each function works on plain tensors and mirrors one kernel:
 
 * :func:`gram_steps_cpu` (and :func:`gram_steps` for any device) — ``gram_pursuit``, the k
   Gram-form matching-pursuit steps: picks and coefficients;

@@ -9,10 +9,11 @@ import re
 from collections.abc import Sequence
 
 from hydra.errors import HydraException
+from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
 from parallax.config.errors import ConfigError
-from parallax.config.plumbing import closest_key, compose
+from parallax.config.plumbing import closest_key, compose, without_hydra
 from parallax.config.schema import SCHEMA_NODE
 from parallax.config.validate import validate
 
@@ -59,14 +60,22 @@ def parse_error(overrides: Sequence[str]) -> str | None:
     return None
 
 
+def composed(
+    overrides: list[str], check: bool, with_hydra: bool = False
+) -> tuple[DictConfig | None, str | None]:
+    """The configuration for these overrides, composed (with Hydra's node if ``with_hydra``)
+    and, if ``check``, validated, and None; or None and the error line."""
+    try:
+        cfg = compose(overrides, with_hydra=with_hydra)
+        if check:
+            validate(without_hydra(cfg) if with_hydra else cfg)
+    except ConfigError as exc:
+        return None, str(exc)
+    except (HydraException, OmegaConfBaseException) as exc:
+        return None, explain(exc, overrides)
+    return cfg, None
+
+
 def composition_error(overrides: list[str], check: bool) -> str | None:
     """The error line for these overrides, or None: composed and, if ``check``, validated."""
-    try:
-        cfg = compose(overrides)
-        if check:
-            validate(cfg)
-    except ConfigError as exc:
-        return str(exc)
-    except (HydraException, OmegaConfBaseException) as exc:
-        return explain(exc, overrides)
-    return None
+    return composed(overrides, check)[1]

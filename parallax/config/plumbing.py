@@ -41,8 +41,9 @@ def register_resolvers() -> None:
         OmegaConf.register_new_resolver("run_name", run_name)
 
 
-def compose(overrides: Sequence[str] = ()) -> DictConfig:
-    """The composed configuration for these overrides, as `parallax-train` would see it."""
+def compose(overrides: Sequence[str] = (), with_hydra: bool = False) -> DictConfig:
+    """The composed configuration for these overrides, as `parallax-train` would see it; with
+    ``with_hydra``, Hydra's own node too (``hydra.run.dir`` & co.; see :func:`without_hydra`)."""
     from hydra import compose as hydra_compose
     from hydra import initialize_config_module
     from hydra.core.global_hydra import GlobalHydra
@@ -52,7 +53,20 @@ def compose(overrides: Sequence[str] = ()) -> DictConfig:
     if GlobalHydra.instance().is_initialized():
         GlobalHydra.instance().clear()
     with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3"):
-        return hydra_compose(config_name=CONFIG_NAME, overrides=list(overrides))
+        return hydra_compose(
+            config_name=CONFIG_NAME, overrides=list(overrides), return_hydra_config=with_hydra
+        )
+
+
+def without_hydra(cfg: DictConfig) -> DictConfig:
+    """The run's configuration from one composed ``with_hydra``: Hydra's node left out, as Hydra
+    hands it to the task."""
+    from omegaconf import open_dict
+
+    task = cfg.copy()
+    with open_dict(task):
+        task.pop("hydra", None)
+    return task
 
 
 RUN_CONFIG_NAME = "config.yaml"
@@ -100,7 +114,9 @@ def load_run_config(run_dir: str | Path) -> DictConfig:
 
     The file must hold every setting of the schema and nothing else: a setting it lacks is not
     given a value here (that would be a guess about how the run was trained), and one the schema
-    no longer has cannot be honoured. Either is a ValueError naming the keys.
+    no longer has cannot be honoured. Either is a ValueError naming the keys. Settings that
+    never change results (RESULT_NEUTRAL_KEYS) are the exception: one the file lacks takes the
+    schema's default, which changes nothing the run computed.
     """
     path = Path(run_dir) / RUN_CONFIG_NAME
     if not path.is_file():
@@ -108,7 +124,7 @@ def load_run_config(run_dir: str | Path) -> DictConfig:
     register_resolvers()
     saved = OmegaConf.load(path)
     have, want = schema_keys(saved), schema_keys()
-    missing, unknown = sorted(want - have), sorted(have - want)
+    missing, unknown = sorted(want - have - RESULT_NEUTRAL_KEYS), sorted(have - want)
     if missing or unknown:
         parts = [f"lacks {', '.join(missing)}"] if missing else []
         parts += [f"has settings parallax does not know: {', '.join(unknown)}"] if unknown else []
@@ -122,7 +138,16 @@ def load_run_config(run_dir: str | Path) -> DictConfig:
 #: Settings that never change a run's results (the same list as the run-directory name ignores
 #: in conf/config.yaml).
 RESULT_NEUTRAL_KEYS = frozenset(
-    {"device", "resume", "train.threads", "train.checkpoint_every", "train.image_every"}
+    {
+        "device",
+        "resume",
+        "train.threads",
+        "train.checkpoint_every",
+        "train.image_every",
+        "train.resume_from",
+        "train.critic_scale_warning",
+        "train.stop_after_non_finite",
+    }
 )
 #: Settings that may differ when a run is resumed: those, and train.presentations (which only
 #: changes how long the run goes on). perturbation.start_fraction and

@@ -213,6 +213,11 @@ class PolicyConfig:
     #: robots of a turn, env.robots_per_turn, teach as much as one). Either is algorithm 3
     #: itself at env.robots=1.
     robot_updates: str = "in_turn"
+    #: Θ's entries start uniform in ±this (0: at zero). The paper gives no initialisation; the
+    #: active-efficient-coding code starts the actor in ±0.4 (its weight_range).
+    initial_actor_range: float = 0.0
+    #: v's entries start uniform in ±this (0: at zero); the active-efficient-coding code: ±0.05.
+    initial_critic_range: float = 0.0
     #: Filled by the trainer: seeds the action-sampling generator.
     seed: int = MISSING
 
@@ -299,6 +304,17 @@ class DistanceConfig:
     #: global: one mapminmax over all of S, as trainlm does | per_input: each position scaled on
     #: its own (which would cancel the weighting).
     input_scaling: str = "global"
+    #: Share of the queue each fit holds out to stop on (MATLAB's dividerand; 0: none): the fit
+    #: stops after ``max_fail`` epochs in a row whose error on these vectors rose, and keeps the
+    #: weights of its best epoch, as MATLAB's train does.
+    validation_fraction: float = 0.0
+    #: Share of the queue each fit leaves out altogether (dividerand's test set; 0: none).
+    test_fraction: float = 0.0
+    #: Epochs in a row with a rising validation error that stop a fit (MATLAB's max_fail).
+    max_fail: int = 6
+    #: Start every fit from lm.mu, as each call of MATLAB's train does; false: carry μ over
+    #: from the last fit (the queue changes by one vector).
+    reset_mu: bool = False
     #: Filled by the trainer: the network's initialisation seed.
     seed: int = MISSING
 
@@ -380,6 +396,18 @@ class TrainConfig:
     #: | best_reward (beyond the paper), the pan whose image the coder encoded best in that
     #: trial, which a runaway at the trial's end does not spoil.
     distance_readout: str = "best_reward"
+    #: Which checkpoint a resumed run continues from: latest (checkpoint.pt) | previous
+    #: (checkpoint_previous.pt, the one written before it), for a latest one that is damaged.
+    resume_from: str = "latest"
+    #: The critic's scale, mean |v·φ| over a presentation, above which the run says once that
+    #: its critic is diverging (parallax/health.py: with rewards in [−2, 0] a critic that fits
+    #: its TD targets stays within 2/(1 − ξ), 100 at ξ = 0.98).
+    critic_scale_warning: float = 100.0
+    #: Presentations in a row with numbers that are not finite (an update the policy skipped, a
+    #: statistic that overflowed, a distance fit stopped on a non-finite Jacobian) after which
+    #: the run stops, keeping its last good checkpoint; null: say so and run on (a study of
+    #: divergence).
+    stop_after_non_finite: int | None = 3
 
 
 @dataclass

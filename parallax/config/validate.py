@@ -33,6 +33,8 @@ RUN_TIME_KEYS = frozenset(
         "distance.seed",
     }
 )
+#: train.resume_from: the latest checkpoint, or the one written before it.
+RESUME_FROM = ("latest", "previous")
 #: movement.route: the paper's sweep of L, or the route the robot plans (beyond the paper, §7).
 ROUTES = ("list", "planned")
 #: The eye image sizes the world can render (parallax.envs.hoap3.Physics.create).
@@ -164,6 +166,10 @@ def _run(check: _Checks) -> None:
     if check.get("train.start_jitter_presentations") is not None:
         check.integer("train.start_jitter_presentations", 0, " or null")
     check.choice("train.distance_readout", DISTANCE_READOUTS)
+    check.choice("train.resume_from", RESUME_FROM)
+    check.number("train.critic_scale_warning", above=0, what=" (|v·φ|)")
+    if check.get("train.stop_after_non_finite") is not None:
+        check.integer("train.stop_after_non_finite", 1, " (presentations) or null")
     check.integer("metrics.mae_window", 1, " (trials)")
     check.integer("metrics.summary_trials", 1, " (trials)")
     check.integer("metrics.distance_window", 1, " (predictions)")
@@ -262,6 +268,8 @@ def _policy(check: _Checks) -> None:
     check.integer("policy.zscore_horizon", 0, " (states; 0: all)")
     check.number("policy.eye_position_reference_m", at_least=0, what=" (metres; 0: off)")
     check.optional_number("policy.actor_projection_radius", above=0, what=" or null")
+    check.number("policy.initial_actor_range", at_least=0)
+    check.number("policy.initial_critic_range", at_least=0)
 
 
 def _distance(check: _Checks) -> None:
@@ -301,6 +309,16 @@ def _distance(check: _Checks) -> None:
     from parallax.distance.targets import TARGET_SOURCES
 
     check.choice("distance.input_scaling", INPUT_SCALINGS)
+    held_out = 0.0
+    for key in ("validation_fraction", "test_fraction"):
+        held_out += check.number(f"distance.{key}", at_least=0, below=1)
+    if held_out >= 1:
+        check.fail(
+            "distance.test_fraction",
+            check.get("distance.test_fraction"),
+            "and distance.validation_fraction must leave some of the queue to fit",
+        )
+    check.integer("distance.max_fail", 1, " (epochs)")
     check.choice("distance.targets", sorted(TARGET_SOURCES))
     check.number("distance.odometry.walk_fraction", above=0, at_most=1)
     check.number("distance.odometry.nominal_stride_m", above=0, what=" (metres)")

@@ -79,6 +79,10 @@ class DistanceLearner:
         odometry: Mapping[str, float] | None = None,
         fit_from: int | None = None,
         input_scaling: str = "global",
+        validation_fraction: float = 0.0,
+        test_fraction: float = 0.0,
+        max_fail: int = 6,
+        reset_mu: bool = False,
     ) -> None:
         self.lateral_positions = [float(value) for value in lateral_positions]
         if not self.lateral_positions or not all(math.isfinite(v) for v in self.lateral_positions):
@@ -114,6 +118,22 @@ class DistanceLearner:
         if fit_from is not None and (int(fit_from) != fit_from or not 1 <= fit_from <= queue_size):
             raise ValueError(f"fit_from must be an integer in 1..queue_size, got {fit_from!r}")
         self.fit_from = int(queue_size if fit_from is None else fit_from)
+        self.validation_fraction = float(validation_fraction)
+        self.test_fraction = float(test_fraction)
+        if not (
+            0 <= self.validation_fraction < 1
+            and 0 <= self.test_fraction < 1
+            and self.validation_fraction + self.test_fraction < 1
+        ):
+            raise ValueError(
+                "validation_fraction and test_fraction must be ≥ 0 with a sum below 1, got "
+                f"{validation_fraction!r} and {test_fraction!r}"
+            )
+        if int(max_fail) != max_fail or max_fail < 1:
+            raise ValueError(f"max_fail must be a positive integer, got {max_fail!r}")
+        self.max_fail, self.reset_mu = int(max_fail), bool(reset_mu)
+        # dividerand's draws, one permutation of the queue per fit
+        self.split_generator = torch.Generator().manual_seed(int(seed) + 1)
         self.fits = 0
         self.observations = 0
 
@@ -145,7 +165,8 @@ class DistanceLearner:
 
         trained (0/1), loss (MSE in m² over the vectors the fit used, after the fit; NaN before
         the first fit), rmse_m, epochs (accepted LM steps), mu, grad_norm (‖Jᵀe‖ at the last
-        epoch), stopped_min_grad, stopped_mu_max, stopped_non_finite (0/1) and queue_fill.
+        epoch), stopped_min_grad, stopped_mu_max, stopped_non_finite, stopped_max_fail (0/1)
+        and queue_fill.
         """
         inputs = self._as_inputs(s)
         if inputs.dim() != 1:
@@ -183,26 +204,59 @@ class DistanceLearner:
             "stopped_min_grad": 0.0,
             "stopped_mu_max": 0.0,
             "stopped_non_finite": 0.0,
+            "stopped_max_fail": 0.0,
             "queue_fill": float(self.queue.fill),
         }
         if self.queue.fill < self.fit_from:
             return stats
         return {**stats, **self._fit()}
 
+    def _split(self, count: int) -> tuple[Tensor, Tensor]:
+        """Training and validation rows of a queue of ``count`` vectors, as MATLAB's
+        ``dividerand`` draws them: a random permutation, the validation and test shares
+        rounded, training the rest; the test rows are left out of the fit."""
+        order = torch.randperm(count, generator=self.split_generator)
+        validation = round(self.validation_fraction * count)
+        training = count - validation - round(self.test_fraction * count)
+        train_rows, validation_rows = order[:training], order[training : training + validation]
+        return train_rows.sort().values, validation_rows.sort().values
+
     def _fit(self) -> dict[str, float]:
         """Fits the network to the queue (§3.5.2); the statistics ``observe`` documents."""
-        if self.optimizer.mu > self.optimizer.mu_max:
+        if self.reset_mu or self.optimizer.mu > self.optimizer.mu_max:
             self.optimizer.mu = self.optimizer.initial_mu
         inputs, targets = self.queue.inputs, self.queue.targets
         weighted = inputs * self.weights
         self.network.fit_scaling(weighted, targets, preserve_function=self.fits > 0)
         epochs = self.initial_epochs if self.fits == 0 else self.epochs_per_call
+        fit_inputs, fit_targets, validation = weighted, targets, None
+        if self.validation_fraction or self.test_fraction:
+            train_rows, validation_rows = (
+                rows.to(targets.device) for rows in self._split(targets.numel())
+            )
+            fit_inputs, fit_targets = weighted[train_rows], targets[train_rows]
+            if validation_rows.numel():
+                check_inputs, check_targets = weighted[validation_rows], targets[validation_rows]
+
+                def validation() -> float:
+                    with torch.no_grad():
+                        errors = _regression_residuals(self.network, check_inputs, check_targets)
+                    return float(errors.square().sum())
+
         result = self.optimizer.run(
-            _regression_residuals, weighted, targets, epochs=epochs, per_sample=True
+            _regression_residuals,
+            fit_inputs,
+            fit_targets,
+            epochs=epochs,
+            per_sample=True,
+            validation=validation,
+            max_fail=self.max_fail,
         )
         self.fits += 1
         mse = result.sse / targets.numel()
-        if self.optimizer.weight_decay:  # result.sse holds λ‖w‖² too; report the data's error only
+        if self.optimizer.weight_decay or fit_targets is not targets:
+            # result.sse holds λ‖w‖² too, or covers the training rows only: report the data's
+            # error over the whole queue
             with torch.no_grad():
                 mse = float(_regression_residuals(self.network, weighted, targets).square().mean())
         return dict(
@@ -215,6 +269,7 @@ class DistanceLearner:
             stopped_min_grad=float(result.stop == "min_grad"),
             stopped_mu_max=float(result.stop == "mu_max"),
             stopped_non_finite=float(result.stop == "non_finite_jacobian"),
+            stopped_max_fail=float(result.stop == "max_fail"),
         )
 
     def predict(self, S: Tensor | np.ndarray | Sequence[Sequence[float]]) -> Tensor | np.ndarray:
@@ -259,6 +314,7 @@ class DistanceLearner:
             "targets": self.target_source.state_dict(),
             "fits": self.fits,
             "observations": self.observations,
+            "split_generator": self.split_generator.get_state(),
         }
 
     def load_state_dict(self, state: Mapping[str, object]) -> None:
@@ -284,5 +340,7 @@ class DistanceLearner:
         self.queue.load_state_dict(state["queue"])  # type: ignore[arg-type]
         self.optimizer.load_state_dict(state["optimizer"])  # type: ignore[arg-type]
         self.target_source.load_state_dict(state["targets"])  # type: ignore[arg-type]
+        if "split_generator" in state:  # a learner that never splits may be saved without it
+            self.split_generator.set_state(state["split_generator"])  # type: ignore[arg-type]
         self.fits = int(state["fits"])  # type: ignore[arg-type]
         self.observations = int(state["observations"])  # type: ignore[arg-type]

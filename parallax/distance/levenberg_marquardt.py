@@ -9,6 +9,11 @@ lowers the sum of squared residuals (then μ ← μ·mu_decrease), otherwise it 
 or when μ > mu_max. Non-finite steps or residuals count as failed steps, and a non-finite
 Jacobian stops the epoch without a step, so NaN/inf never reach the parameters.
 
+Beyond ``trainlm``, ``weight_decay`` λ > 0 minimises Σe² + λ‖w‖² over the parameters w: the
+Gauss–Newton model of that sum gives the steps (JᵀJ + λI + μI)Δ = −(Jᵀe + λw), and a step is
+taken only if it lowers Σe² + λ‖w‖² (the sum of squares of e and √λ·w, without forming those
+P extra rows).
+
 The residuals come from a closure ``closure(forward, *batch) -> residuals`` where ``forward``
 calls the model with the candidate parameters: ``lambda forward, x, y: forward(x) - y``. With
 ``per_sample=True`` the rows of ``batch`` are independent samples and the Jacobian is built one
@@ -34,7 +39,8 @@ MU_FLOOR = 1e-20
 
 @dataclass(frozen=True)
 class LMStepResult:
-    """Outcome of one epoch: ``sse`` is Σe² at the parameters held after the epoch."""
+    """Outcome of one epoch: ``sse`` is Σe² (+ λ‖w‖²) at the parameters held after the epoch,
+    ``grad_norm`` ‖Jᵀe (+ λw)‖ where the epoch started."""
 
     accepted: bool
     sse: float
@@ -51,7 +57,7 @@ class LMRunResult:
     sse: float
     grad_norm: float
     mu: float
-    stop: str  # as LMStepResult.stop; "" means the epoch budget ran out
+    stop: str  # as LMStepResult.stop, or "max_fail"; "" means the epoch budget ran out
 
 
 def _positive(name: str, value: float) -> float:
@@ -129,13 +135,14 @@ class LevenbergMarquardt:
         def forward(*args: object, **kwargs: object) -> Tensor:
             return functional_call(self.model, params, args, kwargs)
 
-        residuals = closure(forward, *batch).reshape(-1)
+        return closure(forward, *batch).reshape(-1)
+
+    def _objective(self, errors: Tensor, flat: Tensor) -> float:
+        """Σe² + λ‖w‖² in float64 for the residuals ``errors`` at the parameters ``flat``."""
+        sse = errors.double().square().sum()
         if self.weight_decay:
-            # Σe² + λ‖w‖² is a sum of squares too: the parameters become extra residuals √λ·w
-            residuals = torch.cat(
-                [residuals, math.sqrt(self.weight_decay) * flat.to(residuals.dtype)]
-            )
-        return residuals
+            sse = sse + self.weight_decay * flat.double().square().sum()
+        return float(sse)
 
     def _jacobian(
         self, flat: Tensor, closure: ResidualClosure, batch: tuple[Tensor, ...], per_sample: bool
@@ -152,21 +159,14 @@ class LevenbergMarquardt:
             return closure(forward, *(t.unsqueeze(0) for t in sample)).reshape(-1)
 
         in_dims = (None,) + (0,) * len(batch)
-        jacobian = vmap(jacrev(one_sample), in_dims=in_dims)(flat, *batch).reshape(
-            -1, self.num_params
-        )
-        if self.weight_decay:
-            penalty = math.sqrt(self.weight_decay) * torch.eye(
-                self.num_params, dtype=jacobian.dtype, device=jacobian.device
-            )
-            jacobian = torch.cat([jacobian, penalty])
-        return jacobian
+        return vmap(jacrev(one_sample), in_dims=in_dims)(flat, *batch).reshape(-1, self.num_params)
 
     # -- the algorithm ------------------------------------------------------------------------
     def step(
         self, closure: ResidualClosure, *batch: Tensor, per_sample: bool = False
     ) -> LMStepResult:
-        """One epoch: a Jacobian, then damped steps until one lowers Σe² or μ > mu_max."""
+        """One epoch: a Jacobian, then damped steps until one lowers Σe² (+ λ‖w‖²) or
+        μ > mu_max."""
         if per_sample and (not batch or len({t.shape[0] for t in batch}) != 1):
             raise ValueError(
                 "per_sample=True needs batch tensors that share their first dimension, "
@@ -177,7 +177,7 @@ class LevenbergMarquardt:
             residuals = self._residuals(flat, closure, batch)
         if not bool(torch.isfinite(residuals).all()):
             raise ValueError("residuals at the current parameters are not finite; check the data")
-        sse = float(residuals.double().square().sum())
+        sse = self._objective(residuals, flat)
         if self.mu > self.mu_max:
             return LMStepResult(False, sse, math.nan, self.mu, "mu_max")
         jacobian_elements = residuals.numel() * self.num_params
@@ -191,20 +191,23 @@ class LevenbergMarquardt:
         jacobian = self._jacobian(flat, closure, batch, per_sample).double()
         errors = residuals.double()
         gradient = jacobian.T @ errors
+        weights = flat.double()
+        if self.weight_decay:
+            gradient = gradient + self.weight_decay * weights
         grad_norm = float(torch.linalg.vector_norm(gradient))
         if not math.isfinite(grad_norm):  # e.g. exp() overflowing in the derivative only
             return LMStepResult(False, sse, grad_norm, self.mu, "non_finite_jacobian")
         if grad_norm < self.min_grad:
             return LMStepResult(False, sse, grad_norm, self.mu, "min_grad")
 
-        solve = _DampedSolver(jacobian, errors, gradient)
+        solve = _DampedSolver(jacobian, errors, gradient, self.weight_decay, weights)
         while self.mu <= self.mu_max:
             delta = solve(self.mu)
             if delta is not None:
                 candidate = flat + delta.to(flat.dtype)
                 with torch.no_grad():
-                    candidate_residuals = self._residuals(candidate, closure, batch).double()
-                candidate_sse = float(candidate_residuals.square().sum())
+                    candidate_residuals = self._residuals(candidate, closure, batch)
+                candidate_sse = self._objective(candidate_residuals, candidate)
                 if math.isfinite(candidate_sse) and candidate_sse < sse:
                     self._write(candidate)
                     self.mu = max(self.mu * self.mu_decrease, MU_FLOOR)
@@ -213,19 +216,43 @@ class LevenbergMarquardt:
         return LMStepResult(False, sse, grad_norm, self.mu, "mu_max")
 
     def run(
-        self, closure: ResidualClosure, *batch: Tensor, epochs: int, per_sample: bool = False
+        self,
+        closure: ResidualClosure,
+        *batch: Tensor,
+        epochs: int,
+        per_sample: bool = False,
+        validation: Callable[[], float] | None = None,
+        max_fail: int = 6,
     ) -> LMRunResult:
-        """Up to ``epochs`` epochs; stops early at min_grad or mu_max."""
+        """Up to ``epochs`` epochs; stops early at min_grad or mu_max.
+
+        With ``validation`` (the validation samples' error at the current parameters) it stops
+        as MATLAB's ``train`` does: after ``max_fail`` epochs in a row whose validation error
+        rose above the best so far (stop "max_fail"), and leaves the parameters at the epoch
+        with the lowest validation error.
+        """
         if int(epochs) != epochs or epochs < 1:
             raise ValueError(f"epochs must be a positive integer, got {epochs!r}")
         accepted = 0
         result = None
+        if validation is not None:
+            best_error, best_flat, fails = validation(), self._flat(), 0
         for _ in range(int(epochs)):
             result = self.step(closure, *batch, per_sample=per_sample)
             accepted += int(result.accepted)
+            if validation is not None and result.accepted:
+                error = validation()
+                if error < best_error:
+                    best_error, best_flat, fails = error, self._flat(), 0
+                elif error > best_error:
+                    fails += 1
+                if fails >= max_fail:
+                    result = LMStepResult(True, result.sse, result.grad_norm, self.mu, "max_fail")
             if result.stop:
                 break
         assert result is not None
+        if validation is not None:
+            self._write(best_flat)
         return LMRunResult(accepted, result.sse, result.grad_norm, self.mu, result.stop)
 
     def state_dict(self) -> dict[str, float]:
@@ -239,27 +266,46 @@ class LevenbergMarquardt:
 
 
 class _DampedSolver:
-    """Solves (JᵀJ + μI)Δ = −Jᵀe for successive μ, factorising the smaller Gram matrix.
+    """Solves (JᵀJ + (λ + μ)I)Δ = −g, g = Jᵀe + λw, for successive μ, factorising the smaller
+    Gram matrix (λ = ``decay``, w = ``weights``; λ = 0: the plain step −(JᵀJ + μI)⁻¹Jᵀe).
 
-    With fewer residuals m than parameters P (the distance network: 300 vs 541) the identity
-    (JᵀJ + μI)⁻¹Jᵀ = Jᵀ(JJᵀ + μI)⁻¹ gives the same step from an m×m Cholesky factorisation.
+    With fewer residuals m than parameters P (the distance network: 100 or 300 vs 541) the step
+    comes from an m×m Cholesky factorisation. With ν = λ + μ, (JᵀJ + νI)⁻¹Jᵀ = Jᵀ(JJᵀ + νI)⁻¹
+    and (JᵀJ + νI)⁻¹ = (I − Jᵀ(JJᵀ + νI)⁻¹J)/ν give
+    Δ = −Jᵀ(JJᵀ + νI)⁻¹(e − (λ/ν)·Jw) − (λ/ν)·w.
     """
 
-    def __init__(self, jacobian: Tensor, errors: Tensor, gradient: Tensor) -> None:
+    def __init__(
+        self,
+        jacobian: Tensor,
+        errors: Tensor,
+        gradient: Tensor,
+        decay: float = 0.0,
+        weights: Tensor | None = None,
+    ) -> None:
         self.jacobian, self.errors, self.gradient = jacobian, errors, gradient
+        self.decay, self.weights = float(decay), weights
         self.dual = jacobian.shape[0] < jacobian.shape[1]
         self.gram = jacobian @ jacobian.T if self.dual else jacobian.T @ jacobian
         self.eye = torch.eye(self.gram.shape[0], dtype=self.gram.dtype, device=self.gram.device)
+        if self.dual and self.decay:
+            self.jacobian_weights = jacobian @ weights
 
     def __call__(self, mu: float) -> Tensor | None:
         """The step for this μ, or None when the factorisation fails or the step is not finite."""
-        factor, info = torch.linalg.cholesky_ex(self.gram + mu * self.eye)
+        damping = self.decay + mu
+        factor, info = torch.linalg.cholesky_ex(self.gram + damping * self.eye)
         if int(info) != 0:
             return None
-        if self.dual:
+        if not self.dual:
+            delta = -torch.cholesky_solve(self.gradient.unsqueeze(-1), factor).squeeze(-1)
+        elif not self.decay:
             delta = -(
                 self.jacobian.T @ torch.cholesky_solve(self.errors.unsqueeze(-1), factor)
             ).squeeze(-1)
         else:
-            delta = -torch.cholesky_solve(self.gradient.unsqueeze(-1), factor).squeeze(-1)
+            share = self.decay / damping
+            right = (self.errors - share * self.jacobian_weights).unsqueeze(-1)
+            delta = -(self.jacobian.T @ torch.cholesky_solve(right, factor)).squeeze(-1)
+            delta = delta - share * self.weights
         return delta if bool(torch.isfinite(delta).all()) else None

@@ -1,12 +1,18 @@
 """Pursuit policy (paper §3.4, eqs. 5–8): natural actor-critic over pan increments.
 
-``NaturalActorCritic`` is the learner the trainer instantiates from ``conf/policy/nac.yaml``; it
-builds the state it acts on from what the robots observe (``NaturalActorCritic.state``: θ, and
-beyond the paper θ_ref, the pans and the reward change). ``features`` holds the optional
-normalisations of θ.
+``NaturalActorCritic`` is the learner the trainer instantiates from ``conf/policy/nac.yaml``.
+``features`` holds what it acts on: ``PolicyInputs`` builds the state from what the robots
+observe (θ, and beyond the paper θ_ref, the pans and the reward change) and ``FeatureNormalizer``
+the optional normalisations of θ.
 """
 
-from parallax.policy.features import FEATURE_NORMS, FeatureNormalizer
+from parallax.policy.features import FEATURE_NORMS, FeatureNormalizer, PolicyInputs
 from parallax.policy.natural_actor_critic import PAPER_ACTIONS_DEG, NaturalActorCritic
 
-__all__ = ["FEATURE_NORMS", "PAPER_ACTIONS_DEG", "FeatureNormalizer", "NaturalActorCritic"]
+__all__ = [
+    "FEATURE_NORMS",
+    "PAPER_ACTIONS_DEG",
+    "FeatureNormalizer",
+    "NaturalActorCritic",
+    "PolicyInputs",
+]

@@ -1,8 +1,13 @@
-"""Normalisation of the learner's state, the pooled activities θ = [θC; θF] of eq. (5).
+"""What the pursuit policy acts on (§3.4): its state and the features φ of eq. (5).
 
-Pooled activities (eq. 3) are small and non-negative (about 0.006 per entry) and share a large
-stimulus-dependent common component, so a linear learner fed with them raw sees a feature vector
-of squared norm ≈ 0.02 whose direction is dominated by that common part. Three choices:
+:class:`PolicyInputs` builds the state from what the robots observe: the pooled activities
+θ = [θC; θF] of eq. (5), and beyond the paper θ − θ_ref, the eye position and the last step's
+reward change; φ is θ's part through :class:`FeatureNormalizer`, the other entries unchanged.
+
+Why θ is normalised: pooled activities (eq. 3) are small and non-negative (about 0.006 per
+entry) and share a large stimulus-dependent common component, so a linear learner fed with them
+raw sees a feature vector of squared norm ≈ 0.02 whose direction is dominated by that common
+part. The choices:
 
 * ``none``          — θ as the coder returns it (the paper's form);
 * ``l1_per_scale``  — each scale's block divided by its L1 norm, so every scale sums to 1 and
@@ -15,7 +20,7 @@ of squared norm ≈ 0.02 whose direction is dominated by that common part. Three
   scaled to unit norm;
 * ``difference``    — beyond the paper: the states are θ(t) − θ_ref, where θ_ref is the pooled
   activity of the pair (I0, I0), i.e. of the same stimulus at zero disparity
-  (``NaturalActorCritic.state`` takes the difference). Each row is divided by
+  (:meth:`PolicyInputs.state` takes the difference). Each row is divided by
   max(‖row‖, running mean of ‖row‖): ‖φ‖ ≤ 1 keeps the α_v = 1 critic step stable, and small
   differences stay small, so at the target (I(t) ≈ I0, φ ≈ 0) the logits vanish for every
   texture and π has no preferred step. The stimulus-specific part of θ, which otherwise shifts
@@ -32,6 +37,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -138,3 +144,136 @@ def _unit_rows(features: torch.Tensor) -> torch.Tensor:
     """
     norm = features.norm(dim=1, keepdim=True)
     return torch.where(norm > _TINY_L1, features / norm.clamp(min=_TINY_L1), 0.0)
+
+
+class PolicyInputs:
+    """The state the policy acts on, (B, input_dim), and its features φ.
+
+    The state is θ (B, state_dim) — θ − θ_ref when :attr:`uses_reference_state` — then the
+    eye-position entry when ``eye_position_reference_m`` > 0, then the reward-change entry when
+    ``reward_change_gain`` > 0 (all three beyond the paper). φ is θ's part through
+    ``normalizer``; the entries after θ pass unchanged. The extra entries and checked states
+    take the dtype and device of ``like``, the policy's parameters.
+    """
+
+    def __init__(
+        self,
+        normalizer: FeatureNormalizer,
+        eye_position_reference_m: float,
+        reward_change_gain: float,
+    ) -> None:
+        self.normalizer = normalizer
+        self.state_dim = normalizer.state_dim
+        self.eye_position_reference_m = eye_position_reference_m
+        self.reward_change_gain = reward_change_gain
+        self.eye_position_dims = 1 if eye_position_reference_m > 0 else 0
+        self.reward_change_dims = 1 if reward_change_gain > 0 else 0
+        self.input_dim = self.state_dim + self.eye_position_dims + self.reward_change_dims
+
+    @property
+    def uses_reference_state(self) -> bool:
+        """Whether the state is θ(t) − θ_ref (``feature_norm=difference``): :meth:`state` then
+        takes θ_ref, the coder's θ for the pair (I0, I0)."""
+        return self.normalizer.mode == REFERENCE_MODE
+
+    def state(
+        self,
+        theta: torch.Tensor,
+        reference_theta: torch.Tensor | None,
+        pans_deg: np.ndarray,
+        lateral_m: float,
+        reward_change: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+        like: torch.Tensor,
+    ) -> torch.Tensor:
+        """The state from the coder's θ (B, state_dim), θ_ref (B, state_dim) or None, the pans
+        (B,) at the robots' shared lateral position (m) and ``reward_change``: (rewards, previous
+        rewards, previous pan increments), each (B,), or None where there is no previous step
+        in the trial (the entry is then 0)."""
+        if (reference_theta is not None) != self.uses_reference_state:
+            raise ValueError(
+                f"feature_norm={self.normalizer.mode!r} "
+                + ("needs θ_ref" if self.uses_reference_state else "takes no θ_ref")
+            )
+        state = theta if reference_theta is None else theta - reference_theta
+        extra = []
+        if self.eye_position_dims:
+            pans = torch.as_tensor(np.asarray(pans_deg, dtype=np.float64))
+            extra.append(self.eye_position_feature(pans, lateral_m, like))
+        if self.reward_change_dims:
+            if reward_change is None:
+                extra.append(torch.zeros(state.shape[0], 1, dtype=like.dtype, device=like.device))
+            else:
+                extra.append(self.reward_change_feature(*reward_change, like))
+        return torch.cat([state, *[e.to(state.dtype) for e in extra]], dim=1) if extra else state
+
+    def check(self, name: str, states: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+        """``states`` as a finite (B, input_dim) tensor in ``like``'s dtype and device."""
+        if (
+            not isinstance(states, torch.Tensor)
+            or states.ndim != 2
+            or states.shape[1] != self.input_dim
+        ):
+            shape = tuple(states.shape) if isinstance(states, torch.Tensor) else type(states)
+            raise ValueError(f"{name} must be a (B, {self.input_dim}) tensor, got {shape}")
+        if not states.is_floating_point():
+            raise ValueError(f"{name} must be a floating-point tensor, got {states.dtype}")
+        if not bool(torch.isfinite(states).all()):
+            raise ValueError(f"{name} holds non-finite values")
+        return states.to(device=like.device, dtype=like.dtype)
+
+    def features(self, states: torch.Tensor) -> torch.Tensor:
+        """φ for checked states, with the normaliser's current statistics."""
+        if self.input_dim == self.state_dim:
+            return self.normalizer(states)
+        return torch.cat(
+            [self.normalizer(states[:, : self.state_dim]), states[:, self.state_dim :]], dim=1
+        )
+
+    def eye_position_feature(
+        self, pan_deg: torch.Tensor, lateral_m: float, like: torch.Tensor
+    ) -> torch.Tensor:
+        """The proprioceptive entry (B, 1) for pans (B,) in degrees at lateral position l (m).
+
+        ν = tan(α)·d_ref / l is the nearness the pan implies (α = atan(l/d) at the target, so
+        ν = d_ref/d there), clipped to [−1, 1]: the same scale at every lateral position, so
+        one linear weight can tell "turned further than any plausible target" wherever the
+        robot stands. A linear policy on pooled activities alone cannot: once the image pair no
+        longer overlaps, a pan past the target and one short of it look alike
+        (``python -m parallax.tools.analysis.landscape … --span 4``). ν is 0 at l = 0, where no
+        pan is implied.
+        """
+        pan = torch.as_tensor(pan_deg, dtype=like.dtype, device=like.device).reshape(-1, 1)
+        if abs(lateral_m) < 1e-9:
+            return torch.zeros_like(pan)
+        nearness = torch.tan(torch.deg2rad(pan)) * (
+            self.eye_position_reference_m / float(lateral_m)
+        )
+        return nearness.clamp(-1.0, 1.0)
+
+    def reward_change_feature(
+        self,
+        rewards: torch.Tensor,
+        previous_rewards: torch.Tensor,
+        previous_increments: torch.Tensor,
+        like: torch.Tensor,
+    ) -> torch.Tensor:
+        """The reward-change entry (B, 1): how much the last pan step changed the reward, signed
+        by the step's direction.
+
+        g = clip(gain · (r_t − r_{t−1}) / |r_{t−1}| · sign(a_{t−1}), −1, 1): > 0 when turning
+        left (a > 0) helped or turning right hurt, < 0 the other way, 0 after a zero step. The
+        reward −(e_C + e_F) peaks at α* on both sides (``parallax.tools.analysis.landscape``),
+        so g says on which side of the peak the eye is, which the pooled activities do not once
+        the image pair no longer overlaps: past the target the eye would keep turning
+        (runaways, docs/improvements.md §6). One weight per action can then say "go back where
+        the reward fell". It is a memory of one step (an efference copy of the last movement
+        and the change it made), not knowledge of the distance. Relative to |r_{t−1}| so one
+        gain serves untrained and trained coders alike, whose rewards differ tenfold."""
+        # numpy on the host: a handful of (B,) values per step, too few to be worth torch's
+        # per-call overhead
+        rewards = np.asarray(rewards, dtype=np.float64).reshape(-1)
+        previous = np.asarray(previous_rewards, dtype=np.float64).reshape(-1)
+        direction = np.sign(np.asarray(previous_increments, dtype=np.float64).reshape(-1))
+        relative = (rewards - previous) / np.maximum(np.abs(previous), 1e-12)
+        change = np.clip(self.reward_change_gain * relative * direction, -1.0, 1.0)
+        return torch.from_numpy(change.reshape(-1, 1)).to(device=like.device, dtype=like.dtype)

@@ -17,7 +17,9 @@ For a batch of B robots ``robot_updates`` says how their rows combine: "mean", e
 own update from the same current parameters and the module applies their mean (J moves by the
 mean reward); "in_turn" (beyond the paper), the rows' updates follow one another, each from the
 parameters the previous one left, as B steps of the algorithm. With B = 1 both are exactly the
-equations.
+equations. One update path writes them (``_apply_update``); "in_turn" runs it row by row, or,
+where no step is projected, the same steps through the rows' Gram matrices (``_apply_in_turn``,
+tested equal to the row-by-row loop).
 Rows marked invalid (the first transition after a stimulus or lateral-position change, which
 would cross a reset) contribute nothing; a batch with no valid row changes nothing.
 """
@@ -33,12 +35,23 @@ import numpy as np
 import torch
 from torch import nn
 
-from parallax.policy.features import REFERENCE_MODE, FeatureNormalizer
+from parallax.policy.features import FeatureNormalizer, PolicyInputs
 
 #: The paper's pan increments in degrees (§3.4).
 PAPER_ACTIONS_DEG = (-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2)
 #: How the updates of B robots' rows combine (see the module docstring).
 ROBOT_UPDATES = ("mean", "in_turn")
+#: The statistics :meth:`NaturalActorCritic.update` reports as one tensor, in its order.
+_STATISTICS = (
+    "td_error",
+    "average_reward",
+    "entropy",
+    "value",
+    "critic_scale",
+    "critic_norm",
+    "advantage_norm",
+    "actor_norm",
+)
 
 
 def _check_int(name: str, value: object, minimum: int) -> int:
@@ -102,6 +115,8 @@ class NaturalActorCritic(nn.Module):
         reward_change_gain: float = 10.0,
         actor_projection_radius: float | None = None,
         robot_updates: str = "in_turn",
+        initial_actor_range: float = 0.0,
+        initial_critic_range: float = 0.0,
     ) -> None:
         super().__init__()
         if robot_updates not in ROBOT_UPDATES:
@@ -116,17 +131,12 @@ class NaturalActorCritic(nn.Module):
             raise ValueError(f"actions must be finite numbers of degrees, got {action_list!r}")
         self.state_dim = state_dim
         self.num_scales = num_scales
-        self.eye_position_reference_m = _check_non_negative(
+        # Beyond the paper: one proprioceptive entry, then one for the last step's change of
+        # reward, after θ (see PolicyInputs)
+        eye_position_reference_m = _check_non_negative(
             "eye_position_reference_m", eye_position_reference_m
         )
-        # Beyond the paper: one proprioceptive entry after the normalised θ (see
-        # eye_position_feature).
-        self.eye_position_dims = 1 if self.eye_position_reference_m > 0 else 0
-        # Beyond the paper: one more entry, the last step's change of reward in its direction
-        # (see reward_change_feature).
-        self.reward_change_gain = _check_non_negative("reward_change_gain", reward_change_gain)
-        self.reward_change_dims = 1 if self.reward_change_gain > 0 else 0
-        self.input_dim = state_dim + self.eye_position_dims + self.reward_change_dims
+        reward_change_gain = _check_non_negative("reward_change_gain", reward_change_gain)
         self.critic_lr = _check_non_negative("critic_lr", critic_lr)
         self.advantage_lr = _check_non_negative("advantage_lr", advantage_lr)
         self.actor_lr = _check_non_negative("actor_lr", actor_lr)
@@ -150,6 +160,8 @@ class NaturalActorCritic(nn.Module):
         self.normalizer = FeatureNormalizer(
             state_dim, num_scales, feature_norm, _check_int("zscore_horizon", zscore_horizon, 0)
         )
+        self.inputs = PolicyInputs(self.normalizer, eye_position_reference_m, reward_change_gain)
+        self.input_dim = self.inputs.input_dim
         num_actions = len(action_list)
         # float64 so that the pan increments sent to the robot are the configured degrees exactly.
         self.register_buffer("action_values", torch.tensor(action_list, dtype=torch.float64))
@@ -172,6 +184,18 @@ class NaturalActorCritic(nn.Module):
         # same seed gives the same actions on every device.
         self._generator = torch.Generator(device="cpu")
         self._generator.manual_seed(seed)
+        self.initial_actor_range = _check_non_negative("initial_actor_range", initial_actor_range)
+        self.initial_critic_range = _check_non_negative(
+            "initial_critic_range", initial_critic_range
+        )
+        if self.initial_actor_range or self.initial_critic_range:
+            # Θ and v drawn uniformly in ±range, as the active-efficient-coding code starts them
+            # (its weight_range); from a generator of their own, so that the sampling stream
+            # is the same whatever the ranges
+            init = torch.Generator(device="cpu").manual_seed(seed + 1)
+            uniform = lambda *shape: 2 * torch.rand(*shape, generator=init) - 1  # noqa: E731
+            self.actor.copy_(self.initial_actor_range * uniform(num_actions, self.input_dim))
+            self.critic.copy_(self.initial_critic_range * uniform(self.input_dim))
 
     @property
     def num_actions(self) -> int:
@@ -181,35 +205,12 @@ class NaturalActorCritic(nn.Module):
     def feature_norm(self) -> str:
         return self.normalizer.mode
 
+    # ------------------------------------------------------------------ inputs (PolicyInputs)
+
     @property
     def uses_reference_state(self) -> bool:
-        """Whether the policy acts on θ(t) − θ_ref (``feature_norm=difference``, beyond the
-        paper): :meth:`state` then takes θ_ref, the coder's θ for the pair (I0, I0)."""
-        return self.feature_norm == REFERENCE_MODE
-
-    # ------------------------------------------------------------------ checks
-
-    def _check_states(self, name: str, states: torch.Tensor) -> torch.Tensor:
-        if (
-            not isinstance(states, torch.Tensor)
-            or states.ndim != 2
-            or states.shape[1] != self.input_dim
-        ):
-            shape = tuple(states.shape) if isinstance(states, torch.Tensor) else type(states)
-            raise ValueError(f"{name} must be a (B, {self.input_dim}) tensor, got {shape}")
-        if not states.is_floating_point():
-            raise ValueError(f"{name} must be a floating-point tensor, got {states.dtype}")
-        if not bool(torch.isfinite(states).all()):
-            raise ValueError(f"{name} holds non-finite values")
-        return states.to(device=self.actor.device, dtype=self.actor.dtype)
-
-    def _check_rows(self, name: str, values: torch.Tensor, batch: int) -> torch.Tensor:
-        if not isinstance(values, torch.Tensor) or values.shape != (batch,):
-            shape = tuple(values.shape) if isinstance(values, torch.Tensor) else type(values)
-            raise ValueError(f"{name} must be a ({batch},) tensor, got {shape}")
-        return values.to(self.actor.device)
-
-    # ------------------------------------------------------------------ state
+        """Whether :meth:`state` takes θ_ref (``feature_norm=difference``, beyond the paper)."""
+        return self.inputs.uses_reference_state
 
     def state(
         self,
@@ -219,99 +220,29 @@ class NaturalActorCritic(nn.Module):
         lateral_m: float,
         reward_change: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> torch.Tensor:
-        """What the policy acts on, (B, input_dim), from what the robots observe: the coder's
-        θ (B, state_dim) — minus θ_ref (B, state_dim) when :attr:`uses_reference_state`, else
-        ``reference_theta`` must be None — then the eye-position entry for the pans (B,) at the
-        robots' shared lateral position when ``eye_position_reference_m`` > 0, then the
-        reward-change entry when ``reward_change_gain`` > 0 (all three beyond the paper; see
-        :meth:`eye_position_feature` and :meth:`reward_change_feature`). ``reward_change`` is
-        (rewards, previous rewards, previous pan increments), each (B,); None where there is no
-        previous step in the trial (the entry is then 0)."""
-        if (reference_theta is not None) != self.uses_reference_state:
-            raise ValueError(
-                f"feature_norm={self.feature_norm!r} "
-                + ("needs θ_ref" if self.uses_reference_state else "takes no θ_ref")
-            )
-        state = theta if reference_theta is None else theta - reference_theta
-        extra = []
-        if self.eye_position_dims:
-            pans = torch.as_tensor(np.asarray(pans_deg, dtype=np.float64))
-            extra.append(self.eye_position_feature(pans, lateral_m))
-        if self.reward_change_dims:
-            if reward_change is None:
-                extra.append(
-                    torch.zeros(state.shape[0], 1, dtype=self.actor.dtype, device=self.actor.device)
-                )
-            else:
-                extra.append(self.reward_change_feature(*reward_change))
-        return torch.cat([state, *[e.to(state.dtype) for e in extra]], dim=1) if extra else state
-
-    # ------------------------------------------------------------------ policy
+        """What the policy acts on, (B, input_dim), from what the robots observe
+        (:meth:`PolicyInputs.state`)."""
+        return self.inputs.state(
+            theta, reference_theta, pans_deg, lateral_m, reward_change, self.actor
+        )
 
     def features(self, states: torch.Tensor) -> torch.Tensor:
         """φ for raw states (B, input_dim), with the normaliser's current statistics."""
-        return self._normalise(self._check_states("phi", states))
-
-    def _normalise(self, states: torch.Tensor) -> torch.Tensor:
-        """θ through the feature normaliser; the entries after θ (eye position, reward change),
-        if any, pass unchanged."""
-        if self.input_dim == self.state_dim:
-            return self.normalizer(states)
-        return torch.cat(
-            [self.normalizer(states[:, : self.state_dim]), states[:, self.state_dim :]], dim=1
-        )
+        return self.inputs.features(self.inputs.check("phi", states, self.actor))
 
     def eye_position_feature(self, pan_deg: torch.Tensor, lateral_m: float) -> torch.Tensor:
-        """The proprioceptive entry (B, 1) for pans (B,) in degrees at lateral position l (m).
-
-        Beyond the paper. ν = tan(α)·d_ref / l is the nearness the pan implies (α = atan(l/d) at
-        the target, so ν = d_ref/d there), clipped to [−1, 1]: the same scale at every lateral
-        position, so one linear weight can tell "turned further than any plausible target"
-        wherever the robot stands. A linear policy on pooled activities alone cannot: once the
-        image pair no longer overlaps, a pan past the target and one short of it look alike
-        (``python -m parallax.tools.analysis.landscape … --span 4``). ν is 0 at l = 0, where no
-        pan is implied.
-        """
-        pan = torch.as_tensor(pan_deg, dtype=self.actor.dtype, device=self.actor.device).reshape(
-            -1, 1
-        )
-        if abs(lateral_m) < 1e-9:
-            return torch.zeros_like(pan)
-        nearness = torch.tan(torch.deg2rad(pan)) * (
-            self.eye_position_reference_m / float(lateral_m)
-        )
-        return nearness.clamp(-1.0, 1.0)
+        """ν (B, 1) for pans (B,) in degrees (:meth:`PolicyInputs.eye_position_feature`)."""
+        return self.inputs.eye_position_feature(pan_deg, lateral_m, self.actor)
 
     def reward_change_feature(
-        self,
-        rewards: torch.Tensor,
-        previous_rewards: torch.Tensor,
-        previous_increments: torch.Tensor,
+        self, rewards: Any, previous_rewards: Any, previous_increments: Any
     ) -> torch.Tensor:
-        """The reward-change entry (B, 1): how much the last pan step changed the reward, signed
-        by the step's direction.
-
-        Beyond the paper. g = clip(gain · (r_t − r_{t−1}) / |r_{t−1}| · sign(a_{t−1}), −1, 1): > 0
-        when turning left (a > 0) helped or turning right hurt, < 0 the other way, 0 after a
-        zero step. The reward −(e_C + e_F) peaks at α* on both sides
-        (``parallax.tools.analysis.landscape``), so g says on which side of the peak the eye is,
-        which the pooled activities do not once the image pair no longer overlaps: past the
-        target the eye would keep turning (runaways, docs/improvements.md §6). One weight per
-        action can then say "go back where the reward fell". It is a memory of one step (an
-        efference copy of the last movement and the change it made), not knowledge of the
-        distance. Relative to |r_{t−1}| so one gain serves untrained and trained coders alike,
-        whose rewards differ tenfold. Where there is no previous step in the trial,
-        :meth:`state` puts 0 instead."""
-        # numpy on the host: a handful of (B,) values per step, too few to be worth torch's
-        # per-call overhead
-        rewards = np.asarray(rewards, dtype=np.float64).reshape(-1)
-        previous = np.asarray(previous_rewards, dtype=np.float64).reshape(-1)
-        direction = np.sign(np.asarray(previous_increments, dtype=np.float64).reshape(-1))
-        relative = (rewards - previous) / np.maximum(np.abs(previous), 1e-12)
-        change = np.clip(self.reward_change_gain * relative * direction, -1.0, 1.0)
-        return torch.from_numpy(change.reshape(-1, 1)).to(
-            device=self.actor.device, dtype=self.actor.dtype
+        """g (B, 1) for (B,) rewards (:meth:`PolicyInputs.reward_change_feature`)."""
+        return self.inputs.reward_change_feature(
+            rewards, previous_rewards, previous_increments, self.actor
         )
+
+    # ------------------------------------------------------------------ policy
 
     def _logits(self, features: torch.Tensor) -> torch.Tensor:
         return features @ self.actor.T / self.temperature
@@ -327,10 +258,10 @@ class NaturalActorCritic(nn.Module):
         In training mode the raw states first join the running feature statistics (``zscore``);
         in eval mode (``.eval()``) acting leaves every buffer as it was.
         """
-        states = self._check_states("phi", phi)
+        states = self.inputs.check("phi", phi, self.actor)
         if self.training:
             self.normalizer.observe(states[:, : self.state_dim])
-        logits = self._logits(self._normalise(states))
+        logits = self._logits(self.inputs.features(states))
         if greedy:
             ordered = logits[:, self._greedy_tie_order]
             return self._greedy_tie_order[ordered.argmax(dim=1)]
@@ -340,6 +271,12 @@ class NaturalActorCritic(nn.Module):
         return index.clamp(max=self.num_actions - 1)
 
     # ------------------------------------------------------------------ learning
+
+    def _check_rows(self, name: str, values: torch.Tensor, batch: int) -> torch.Tensor:
+        if not isinstance(values, torch.Tensor) or values.shape != (batch,):
+            shape = tuple(values.shape) if isinstance(values, torch.Tensor) else type(values)
+            raise ValueError(f"{name} must be a ({batch},) tensor, got {shape}")
+        return values.to(self.actor.device)
 
     @torch.no_grad()
     def update(
@@ -355,12 +292,14 @@ class NaturalActorCritic(nn.Module):
         ``reward`` is the reward observed in φ′ (the coder's −(eC + eF) for the next image);
         rows with ``valid`` False change nothing. Returns floats for logging: ``td_error`` (mean
         δ over valid rows, 0 when none), ``average_reward`` (J after the step), ``entropy``
-        (mean entropy of π(·|φ) over all rows), ``value`` (mean v·φ), ``advantage_norm`` ‖w‖,
+        (mean entropy of π(·|φ) over all rows), ``value`` (mean v·φ), ``critic_scale`` (mean
+        |v·φ|: the critic's scale, which a diverging critic inflates long before the actor
+        shows it), ``critic_norm`` ‖v‖, ``advantage_norm`` ‖w‖,
         ``actor_norm`` ‖Θ‖ and ``valid_fraction``.
         """
         features = self.features(phi)
         batch = features.shape[0]
-        next_features = self._normalise(self._check_states("next_phi", next_phi))
+        next_features = self.inputs.features(self.inputs.check("next_phi", next_phi, self.actor))
         action = self._check_rows("action", action, batch)
         if action.dtype != torch.int64:
             raise ValueError(f"action must be an int64 (LongTensor) of indices, got {action.dtype}")
@@ -384,20 +323,11 @@ class NaturalActorCritic(nn.Module):
         else:
             td_error = self._apply_in_turn(*rows)
         valid_count = int(valid.sum())
-        summary = torch.stack(
-            [
-                td_error.mean() if valid_count else torch.zeros((), device=features.device),
-                self.average_reward,
-                entropy.mean() if batch else torch.zeros((), device=features.device),
-                (features @ self.critic).mean()
-                if batch
-                else torch.zeros((), device=features.device),
-                self.advantage.norm(),
-                self.actor.norm(),
-            ]
-        ).tolist()
-        names = ("td_error", "average_reward", "entropy", "value", "advantage_norm", "actor_norm")
-        stats = dict(zip(names, summary))
+        zero, values = torch.zeros((), device=features.device), features @ self.critic
+        summary = [td_error.mean() if valid_count else zero, self.average_reward]
+        summary += [entropy.mean(), values.mean(), values.abs().mean()] if batch else [zero] * 3
+        summary += [self.critic.norm(), self.advantage.norm(), self.actor.norm()]
+        stats = dict(zip(_STATISTICS, torch.stack(summary).tolist()))
         stats["valid_fraction"] = valid_count / batch if batch else 0.0
         stats["rejected_updates"] = float(self.rejected_updates)
         return stats
@@ -410,28 +340,27 @@ class NaturalActorCritic(nn.Module):
         next_features: torch.Tensor,
         probabilities: torch.Tensor,
     ) -> torch.Tensor:
-        """Applies the mean of the per-row updates of the (valid) rows given; returns their δ."""
+        """Algorithm 3 for each of the (valid) rows given, all from the current parameters, and
+        the mean of their updates applied; returns their δ. One row: the equations exactly."""
         count = features.shape[0]
         if count == 0:
             return features.new_zeros(0)
-        # Each robot's own J update enters its δ, so that the batch applies exactly the mean of
-        # the single-robot updates; the new J is their mean.
-        row_average_reward = (
-            1 - self.reward_rate
-        ) * self.average_reward + self.reward_rate * reward
+        # J ← (1 − ζ)·J + ζ·r for each row, which enters its δ; the new J is their mean
+        average_reward = (1 - self.reward_rate) * self.average_reward + self.reward_rate * reward
+        # δ = r − J + ξ·v·φ′ − v·φ
         td_error = (
             reward
-            - row_average_reward
+            - average_reward
             + self.discount * (next_features @ self.critic)
             - features @ self.critic
         )
-        self.average_reward.copy_(row_average_reward.mean())
-        # Per row ψ = ((e_a − π) ⊗ φ)/T and ψᵀw = (e_a − π)·(wφ)/T: no (B, |A|, D) tensor.
+        self.average_reward.copy_(average_reward.mean())
+        # ψ = ((e_a − π) ⊗ φ)/T kept as its factor (e_a − π)/T, so ψᵀw = (e_a − π)·(wφ)/T
         score = -probabilities
         score[torch.arange(count, device=score.device), action] += 1
         score /= self.temperature
-        advantage_estimate = (score * (features @ self.advantage.T)).sum(dim=1)
-        # mean_i (δ_i − ψ_iᵀw)·ψ_i  =  Σ_i (δ_i − ψ_iᵀw)·score_i ⊗ φ_i / B
+        advantage_estimate = (score * (features @ self.advantage.T)).sum(dim=1)  # ψᵀw
+        # Σ_rows (δ − ψᵀw)·ψ and Σ_rows δ·φ, divided by the rows' count below
         advantage_step = ((td_error - advantage_estimate).unsqueeze(1) * score).T @ features
         critic_step = td_error @ features
         if not (
@@ -441,12 +370,13 @@ class NaturalActorCritic(nn.Module):
             # reject it and keep the parameters, as LM rejects a failed step.
             self.rejected_updates.add_(1)
             return td_error
-        self.critic.add_(critic_step, alpha=self.critic_lr / count)
+        self.critic.add_(critic_step, alpha=self.critic_lr / count)  # v ← v + α_v·δ·φ
         self.advantage.add_(advantage_step, alpha=self.advantage_lr / count)
+        # Θ ← Θ·(1 − α_p·λ) + α_p·w
         self.actor.mul_(1 - self.actor_lr * self.weight_decay).add_(
             self.advantage, alpha=self.actor_lr
         )
-        if self.actor_projection_radius is not None:
+        if self.actor_projection_radius is not None:  # Γ: back onto the ball
             norm = self.actor.norm()
             if norm > self.actor_projection_radius:
                 self.actor.mul_(self.actor_projection_radius / norm)
@@ -525,8 +455,9 @@ class NaturalActorCritic(nn.Module):
         reward: torch.Tensor,
         next_features: torch.Tensor,
     ) -> torch.Tensor:
-        """:meth:`_apply_in_turn` written as n single-row updates, each rejected on its own when
-        not finite, each projected when ``actor_projection_radius`` is set."""
+        """The rows' updates one after the other as n single-row :meth:`_apply_update` steps,
+        each rejected on its own when not finite, each projected when
+        ``actor_projection_radius`` is set."""
         td_errors = []
         for row in range(features.shape[0]):
             one = slice(row, row + 1)
@@ -556,6 +487,9 @@ class NaturalActorCritic(nn.Module):
             f"ξ={self.discount}, ζ={self.reward_rate}, λ={self.weight_decay}, "
             f"T={self.temperature}, feature_norm={self.feature_norm!r}, "
             f"zscore_horizon={self.normalizer.horizon}, "
-            f"eye_position_reference_m={self.eye_position_reference_m}, "
-            f"reward_change_gain={self.reward_change_gain}, robot_updates={self.robot_updates!r}"
+            f"eye_position_reference_m={self.inputs.eye_position_reference_m}, "
+            f"reward_change_gain={self.inputs.reward_change_gain}, "
+            f"robot_updates={self.robot_updates!r}, "
+            f"initial_actor_range={self.initial_actor_range}, "
+            f"initial_critic_range={self.initial_critic_range}"
         )

@@ -41,6 +41,8 @@ from parallax.config import (
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
 from parallax.tools import plots
+from parallax.tools.report.runs import read_metrics
+from parallax.writable import folder_problem
 
 #: The settings of the held-out textures that parallax-eval may change.
 STIMULI_PREFIX = "env.stimuli."
@@ -196,6 +198,10 @@ def evaluate(
     run_dir = Path(run_dir)
     out_dir = Path(out) if out else run_dir
     cfg = load_run_config(run_dir)
+    problem = folder_problem(out_dir)
+    if problem:  # before the trials, which take minutes
+        where = f"--out {out}" if out else str(run_dir)
+        raise ValueError(f"{where}: {problem}; choose another folder with --out DIR")
     readout = readout or distance_readout(cfg)  # by default, s as the run's distance learner saw it
     if device is not None:  # e.g. a run trained on a GPU, evaluated on a machine without one
         if device != "cpu" and not (device == "cuda" or device.startswith("cuda:")):
@@ -213,6 +219,10 @@ def evaluate(
     ckpt_path = run_dir / checkpoint_name
     if not ckpt_path.is_file():
         raise FileNotFoundError(f"{run_dir} has no {checkpoint_name}: nothing to evaluate")
+    try:
+        state = checkpoint.read(ckpt_path, config=cfg)
+    except checkpoint.CheckpointError as exc:
+        raise ValueError(f"{exc}; {_other_checkpoint(run_dir, checkpoint_name)}") from None
     for item in stimuli:
         key, sep, value = item.partition("=")
         if not sep or not key.startswith(STIMULI_PREFIX) or key == f"{STIMULI_PREFIX}split":
@@ -232,16 +242,21 @@ def evaluate(
             f"--robots {robots}: a run that plans its route or walks is evaluated with its own "
             f"env.robots={trained_robots}"
         )
-    state = checkpoint.load(ckpt_path)
     cfg.env.robots = robots
     exp = Experiment(cfg, stimuli_split="heldout")
-    out_dir.mkdir(parents=True, exist_ok=True)
     try:
         learnt = state["experiment"]
         if robots != trained_robots:
             # the checkpoint holds one stream per trained robot; these robots keep their own
             learnt = {**learnt, "env_random": [env.task.random.get_state() for env in exp.envs]}
-        exp.load_state_dict(learnt)
+        try:
+            exp.load_state_dict(learnt)
+        except (KeyError, RuntimeError, TypeError, ValueError, IndexError) as exc:
+            # written by another version of parallax or another experiment: its parts do not fit
+            raise ValueError(
+                f"{ckpt_path} does not fit this run's models ({checkpoint.describe(exc)}); "
+                f"{_other_checkpoint(run_dir, checkpoint_name)}"
+            ) from None
         exp.set_stage(len(exp.stages) - 1)
         start = perturbation_start(cfg)
         # Perturbed once a presentation ran after the switch (a checkpoint taken at the switch
@@ -366,20 +381,24 @@ def evaluate(
     finally:
         exp.close()
 
+    out_dir.mkdir(parents=True, exist_ok=True)
     plots.mae_per_position(result["mae_per_position"], out_dir / "eval_mae_per_position.png")
     if curves:
         plots.error_vs_distance(curves, out_dir / "eval_error_vs_distance.png")
-    metrics_path = run_dir / "metrics.jsonl"
-    if metrics_path.is_file():
-        records = [
-            json.loads(line) for line in metrics_path.read_text().splitlines() if line.strip()
-        ]
+    records = read_metrics(run_dir)  # plain or compacted (parallax.tools.report.compact)
+    if records:
         first = next((i for i, r in enumerate(records) if r.get("perturbed")), None)
         switch = None if first is None else (records[first - 1]["steps"] if first else 0)
-        if records:
-            plots.mae_curves(records, out_dir / "mae_curves.png", perturbation_at=switch)
+        plots.mae_curves(records, out_dir / "mae_curves.png", perturbation_at=switch)
     (out_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
     return result
+
+
+def _other_checkpoint(run_dir: Path, name: str) -> str:
+    """What to do when the checkpoint ``name`` of ``run_dir`` cannot be evaluated."""
+    if name == checkpoint.CHECKPOINT_NAME and (run_dir / checkpoint.PREVIOUS_NAME).is_file():
+        return f"evaluate the one before with --checkpoint {checkpoint.PREVIOUS_NAME}"
+    return "evaluate another checkpoint with --checkpoint NAME, or train the run again"
 
 
 def format_eval(result: dict) -> str:
@@ -478,7 +497,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--checkpoint",
         default=checkpoint.CHECKPOINT_NAME,
         help=f"checkpoint file in the run dir (default {checkpoint.CHECKPOINT_NAME}; "
-        f"{checkpoint.BEFORE_PERTURBATION_NAME} for the state before §5's perturbation)",
+        f"{checkpoint.BEFORE_PERTURBATION_NAME} for the state before §5's perturbation, "
+        f"{checkpoint.PREVIOUS_NAME} for the one written before the latest)",
     )
     parser.add_argument(
         "--device", default=None, help="cpu or cuda (default: the device the run was trained on)"

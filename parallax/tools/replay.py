@@ -55,7 +55,9 @@ from parallax.tools.report.runs import (
     eval_files,
     find_run_dirs,
     read_metrics,
+    read_record,
 )
+from parallax.writable import folder_problem
 
 #: Settings a replay may change: the distance learner's, and the body's walk to the panel.
 REPLAYABLE_PREFIXES = ("distance.", "env.walk.")
@@ -199,10 +201,15 @@ def replay(
     }
 
 
-def _replayed_checkpoint(source: Path, learner, tracker, stats, before_perturbation) -> dict:
+def _replayed_checkpoint(
+    source: Path, learner, tracker, stats, before_perturbation, config: DictConfig
+) -> dict:
     """The source's checkpoint with the replayed distance learner (and its online-error tracker)
-    in place of the trained one: the eye, coder and policy are the source's, as in the replay."""
+    in place of the trained one: the eye, coder and policy are the source's, as in the replay.
+    It records the replay's settings (``config``), which it now holds."""
     state = checkpoint.load(source, map_location="cpu")
+    if "config" in state:
+        state["config"] = OmegaConf.to_container(config, resolve=True)
     state["experiment"]["distance"] = learner.state_dict()
     state["dist"] = tracker.state_dict()
     state["last_distance_stats"] = stats
@@ -281,7 +288,7 @@ def _rescore_evals(
     rescored = {}
     start = (summary.get("before_perturbation") or {}).get("presentations")
     for path in eval_files(run_dir):
-        result = json.loads(path.read_text())
+        result = json.loads(read_record(path))
         samples = _eval_samples(result, readout)
         if not samples:
             continue  # an eval without the samples, or with s read out otherwise only
@@ -366,6 +373,22 @@ def find_sources(paths: Iterable[str | Path]) -> list[Path]:
     return found
 
 
+def check_checkpoints(sources: Iterable[Path]) -> None:
+    """Every checkpoint a whole replay copies (:func:`write_replay`) can be read and is its
+    run's; else a ReplayError naming it, before any replay is written."""
+    for source in sources:
+        cfg = load_run_config(source)
+        for name in (CHECKPOINT_NAME, BEFORE_PERTURBATION_NAME):
+            if (source / name).is_file():
+                try:
+                    checkpoint.read(source / name, config=cfg)
+                except checkpoint.CheckpointError as exc:
+                    raise ReplayError(
+                        f"{exc}; the replay writes it again with the replayed learner: move it "
+                        "aside to replay without it"
+                    ) from None
+
+
 def write_replay(result: dict, out_dir: Path) -> None:
     """The replay as a run directory: config, summary, the rescored evals and, for a whole
     replay, the source's checkpoints with the replayed learner (so parallax-eval runs on it)."""
@@ -374,7 +397,12 @@ def write_replay(result: dict, out_dir: Path) -> None:
         source = result["source"] / name
         if source.is_file():
             state = _replayed_checkpoint(
-                source, learner, tracker, stats, result["summary"].get("before_perturbation")
+                source,
+                learner,
+                tracker,
+                stats,
+                result["summary"].get("before_perturbation"),
+                result["config"],
             )
             checkpoint.save_atomic(state, out_dir / name)
     (out_dir / RUN_CONFIG_NAME).write_text(OmegaConf.to_yaml(result["config"], resolve=True))
@@ -415,6 +443,11 @@ def main(argv: list[str] | None = None) -> None:
         combos = parse_sweep(overrides)
         sources = find_sources(paths)
         out = Path(args.out)
+        problem = folder_problem(out)
+        if problem:
+            raise ReplayError(f"--out {args.out}: {problem}; choose another folder")
+        if not args.until_perturbation:
+            check_checkpoints(sources)
         totals: dict[
             str, dict[str, list[float]]
         ] = {}  # combo → what was scored → one total per source

@@ -409,6 +409,30 @@ def test_the_kernel_choice_follows_the_argument_and_the_environment(monkeypatch)
         )
 
 
+def test_kernels_that_differ_by_one_bit_are_refused_at_load_time(compiled, monkeypatch) -> None:
+    # the package hands the loader its check (parallax.coding.native_check), which compares
+    # every kernel with the numpy/torch code before the coder may use one
+    from types import SimpleNamespace
+
+    from parallax.coding import native, native_check
+
+    assert native._self_check is native_check.self_check
+
+    def gram_pursuit(correlations, gram, sparsity):
+        picks, coefficients = compiled.gram_pursuit(correlations, gram, sparsity)
+        return picks, torch.nextafter(coefficients, torch.full_like(coefficients, np.inf))
+
+    names = ("codes_and_residuals", "residuals_only", "codes_times_residuals", "dictionary_step")
+    names += ("encode_pairs", "pooled_activity")
+    off = SimpleNamespace(gram_pursuit=gram_pursuit, **{n: getattr(compiled, n) for n in names})
+    monkeypatch.setattr(native, "_build", lambda: off)
+    monkeypatch.setattr(native, "_loaded", False)
+    monkeypatch.setattr(native, "_module", None)
+    monkeypatch.setattr(native, "_failure", None)
+    assert native.load_kernels() is None
+    assert "coefficients differ" in native.kernel_failure()
+
+
 def test_without_the_kernels_the_coder_falls_back_with_one_warning(monkeypatch, caplog) -> None:
     from parallax.coding import native
     from parallax.coding.dictionary import gradient_step_

@@ -84,6 +84,18 @@ def test_a_saved_config_that_lacks_a_setting_is_refused_not_filled_in(tmp_path):
     assert "does not know: distance.outlier_mads" in str(error.value)
 
 
+def test_a_saved_config_that_lacks_a_setting_that_changes_no_result_takes_its_default(tmp_path):
+    from omegaconf import OmegaConf
+
+    from parallax.config import load_run_config
+
+    saved = OmegaConf.to_container(compose([]))
+    del saved["train"]["stop_after_non_finite"], saved["train"]["resume_from"]
+    (tmp_path / "config.yaml").write_text(OmegaConf.to_yaml(saved))
+    loaded = load_run_config(tmp_path)
+    assert (loaded.train.stop_after_non_finite, loaded.train.resume_from) == (3, "latest")
+
+
 def test_a_changed_setting_is_named_when_resuming():
     from parallax.config import changed_settings
 

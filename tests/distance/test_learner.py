@@ -289,3 +289,44 @@ def test_distance_error_by_range():
         distance_error_by_range([1.0], [0.0])
     with pytest.raises(ValueError, match="equal length"):
         distance_error_by_range([1.0, 2.0], [3.0])
+
+
+# -- MATLAB train's defaults: dividerand and the validation stop -------------------------------
+def test_each_fit_splits_the_queue_as_dividerand_and_stops_on_validation():
+    pans, distances = paper_regression(60, np.random.default_rng(7), lateral_positions_m=SMALL_L)
+    matlab = dict(validation_fraction=0.15, test_fraction=0.15, epochs_per_call=1000)
+    learner = small_learner(**matlab, initial_epochs=1000, reset_mu=True)
+    train_rows, validation_rows = learner._split(40)
+    assert (len(train_rows), len(validation_rows)) == (28, 6)  # 70 / 15 / 15 of 40
+    assert not set(train_rows.tolist()) & set(validation_rows.tolist())
+    stats = feed(learner, pans, distances)
+    fitted = [s for s in stats if s["trained"]]
+    assert len(fitted) == 21
+    # a fit of up to 1000 epochs ends on the validation vectors (or at trainlm's other stops),
+    # never on its epoch budget
+    assert all(s["epochs"] < 1000 for s in fitted)
+    assert sum(s["stopped_max_fail"] for s in fitted) > 0
+    assert learner.optimizer.mu == learner.optimizer.initial_mu or learner.reset_mu
+
+
+def test_the_split_stream_resumes_bit_identically():
+    pans, distances = paper_regression(50, np.random.default_rng(5), lateral_positions_m=SMALL_L)
+    matlab = dict(validation_fraction=0.15, test_fraction=0.15, max_fail=2, reset_mu=True)
+    straight = small_learner(**matlab)
+    feed(straight, pans, distances)
+    first = small_learner(**matlab)
+    feed(first, pans[:44], distances[:44])
+    resumed = small_learner(**matlab, seed=123)
+    resumed.load_state_dict(first.state_dict())
+    feed(resumed, pans[44:], distances[44:])
+    for (name, a), b in zip(
+        straight.network.state_dict().items(), resumed.network.state_dict().values()
+    ):
+        assert torch.equal(a, b), name
+
+
+def test_bad_split_settings_are_refused():
+    with pytest.raises(ValueError, match="sum below 1"):
+        small_learner(validation_fraction=0.5, test_fraction=0.5)
+    with pytest.raises(ValueError, match="max_fail"):
+        small_learner(max_fail=0)

@@ -144,6 +144,25 @@ def test_dual_and_primal_steps_agree():
     torch.testing.assert_close(dual(0.5), primal_step, rtol=1e-9, atol=1e-10)
 
 
+@pytest.mark.parametrize("rows", [30, 80])
+def test_weight_decay_steps_are_the_extra_rows_steps(rows):
+    # λ on the diagonal, in the dual (30 < 50 parameters) and the primal form (80 > 50): the
+    # step of the sum of squares of e and √λ·w, i.e. of the rows [J; √λ·I] and [e; √λ·w]
+    generator = torch.Generator().manual_seed(rows)
+    jacobian = torch.randn(rows, 50, generator=generator, dtype=torch.float64)
+    errors = torch.randn(rows, generator=generator, dtype=torch.float64)
+    weights = torch.randn(50, generator=generator, dtype=torch.float64)
+    decay, mu = 0.1, 1e-3
+    solver = _DampedSolver(jacobian, errors, jacobian.T @ errors + decay * weights, decay, weights)
+    assert solver.dual == (rows < 50)
+    root = math.sqrt(decay)
+    stacked = torch.cat([jacobian, root * torch.eye(50, dtype=torch.float64)])
+    stacked_errors = torch.cat([errors, root * weights])
+    gram = stacked.T @ stacked + mu * torch.eye(50, dtype=torch.float64)
+    expected = -torch.linalg.solve(gram, stacked.T @ stacked_errors)
+    torch.testing.assert_close(solver(mu), expected, rtol=1e-9, atol=1e-10)
+
+
 def test_works_for_another_small_module_in_float32():
     inputs = torch.linspace(-3, 3, 64).unsqueeze(-1)
     targets = torch.sin(inputs).squeeze(-1)
@@ -265,3 +284,33 @@ def test_weight_decay_finds_the_ridge_solution(per_sample):
     assert result.sse == pytest.approx(data_sse + decay * float(ridge.square().sum()), rel=1e-9)
     with pytest.raises(ValueError, match="weight_decay must be a finite number ≥ 0, got -1"):
         trainlm(nn.Linear(2, 1), weight_decay=-1)
+
+
+def test_validation_stop_keeps_the_best_epochs_parameters():
+    """MATLAB train's early stop: after max_fail rising validation errors the fit ends, with the
+    parameters of the epoch whose validation error was lowest."""
+    rng = np.random.default_rng(3)
+    inputs = torch.from_numpy(rng.uniform(-1, 1, (60, 2)))
+    targets = torch.sin(3 * inputs[:, 0]) + 0.3 * torch.from_numpy(rng.normal(size=60))
+    fit_inputs, fit_targets = inputs[:20], targets[:20]  # few, noisy: it overfits
+    check_inputs, check_targets = inputs[20:], targets[20:]
+    network = scaled_network(inputs, targets, hidden=8, seed=1)
+    optimizer = trainlm(network)
+    seen = []
+
+    def validation() -> float:
+        with torch.no_grad():
+            error = float((network(check_inputs) - check_targets).square().sum())
+        seen.append(error)
+        return error
+
+    result = optimizer.run(
+        regression, fit_inputs, fit_targets, epochs=500, validation=validation, max_fail=3
+    )
+    assert result.stop == "max_fail"
+    best = min(seen)
+    assert seen.index(best) < len(seen) - 3  # three rises in a row after the best
+    assert all(error > best for error in seen[-3:])
+    with torch.no_grad():
+        kept = float((network(check_inputs) - check_targets).square().sum())
+    assert kept == best

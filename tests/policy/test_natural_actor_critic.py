@@ -555,3 +555,36 @@ def test_in_turn_projects_each_rows_step_when_a_radius_is_set() -> None:
     assert float(in_turn.actor.norm()) <= 0.5 + 1e-6
     for name in ("critic", "advantage", "actor", "average_reward"):
         assert torch.equal(getattr(in_turn, name), getattr(one_by_one, name)), name
+
+
+def test_initial_ranges_start_the_weights_as_the_active_efficient_coding_code() -> None:
+    """Θ and v uniform in ±range (AEC's weight_range), the same for the same seed, and drawn
+    apart from the sampling stream: the actions drawn for given logits do not change."""
+    plain = _policy(seed=5)
+    assert not plain.actor.any() and not plain.critic.any()
+    started = _policy(seed=5, initial_actor_range=0.4, initial_critic_range=0.05)
+    assert 0 < float(started.actor.abs().max()) <= 0.4
+    assert float(started.actor.abs().max()) > 0.3  # spread over the range, not clustered
+    assert 0 < float(started.critic.abs().max()) <= 0.05
+    again = _policy(seed=5, initial_actor_range=0.4, initial_critic_range=0.05)
+    assert torch.equal(again.actor, started.actor) and torch.equal(again.critic, started.critic)
+    other = _policy(seed=6, initial_actor_range=0.4, initial_critic_range=0.05)
+    assert not torch.equal(other.actor, started.actor)
+    assert torch.equal(plain._generator.get_state(), started._generator.get_state())
+    with pytest.raises(ValueError, match="initial_actor_range"):
+        _policy(initial_actor_range=-1.0)
+
+
+def test_the_critics_scale_is_reported() -> None:
+    """mean |v·φ| and ‖v‖ with the critic the update leaves."""
+    policy = _policy()
+    _randomise(policy, seed=2)
+    phi, next_phi = _states(3, seed=1), _states(3, seed=2)
+    before = float((policy.features(phi) @ policy.critic).abs().mean())
+    stats = policy.update(
+        phi, torch.tensor([0, 1, 2]), torch.full((3,), -0.5), next_phi, torch.ones(3, dtype=bool)
+    )
+    after = float((policy.features(phi) @ policy.critic).abs().mean())
+    assert after != pytest.approx(before, rel=1e-3)
+    assert stats["critic_scale"] == pytest.approx(after, rel=1e-6)
+    assert stats["critic_norm"] == pytest.approx(float(policy.critic.norm()), rel=1e-6)

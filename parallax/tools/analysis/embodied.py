@@ -35,6 +35,7 @@ import numpy as np
 
 from parallax.config import load_run_config
 from parallax.tools.replay import ReplayError, find_sources, replay
+from parallax.tools.report.runs import record_file
 
 FRACTIONS = (1.0, 0.3, 0.1)
 SLIPS = (0.0, 0.02, 0.05)
@@ -129,8 +130,8 @@ def study(sources: Sequence[Path], cache: Path | None = None) -> dict:
 
 
 def _eval_time(source: Path) -> float:
-    path = source / FINAL_EVAL
-    return path.stat().st_mtime if path.is_file() else 0.0
+    path = record_file(source / FINAL_EVAL)  # or its compressed form
+    return path.stat().st_mtime if path is not None else 0.0
 
 
 def study_one(source: Path) -> dict:

@@ -37,6 +37,7 @@ from parallax.config import load_run_config
 from parallax.distance.metrics import distance_error_by_range
 from parallax.experiment import distance_learner
 from parallax.tools.analysis.baselines import target_pans
+from parallax.tools.report.runs import EVAL_NAME, read_record, record_file
 
 
 def position_line_estimates(train_pans, train_distances, pans) -> np.ndarray:
@@ -101,10 +102,10 @@ def action_grid_step(actions) -> float:
 def eye_bound(eval_dir: str | Path) -> dict:
     """The network's error, the two learners' fitted to the same eye movements, and the action
     grid's floor (module docstring) for the evaluation in ``eval_dir``."""
-    path = Path(eval_dir) / "eval.json"
-    if not path.is_file():
+    path = Path(eval_dir) / EVAL_NAME  # or its compressed form
+    if record_file(path) is None:
         raise FileNotFoundError(f"{eval_dir} holds no eval.json (run parallax-eval first)")
-    result = json.loads(path.read_text())
+    result = json.loads(read_record(path))
     readout = result["readout"]
     distances = np.asarray(result["greedy_samples"]["grid"]["distances"], float)
     pans = np.asarray(result["greedy_samples_by_readout"][readout]["grid"]["pans"], float)

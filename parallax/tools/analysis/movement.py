@@ -39,6 +39,7 @@ from parallax.distance.planner import MovementPlanner
 from parallax.metrics import position_label
 from parallax.tools.evaluate import route_results
 from parallax.tools.replay import ReplayError, find_sources, read_stream
+from parallax.tools.report.runs import read_record, record_file
 
 PRICES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
 EVAL = "eval.json"
@@ -61,10 +62,10 @@ def planner_of(run_dir: Path, price_per_trial: float = 0.0) -> tuple[MovementPla
 
 def held_out(run_dir: Path) -> tuple[np.ndarray, np.ndarray, dict]:
     """The greedy eye's vectors s and distances of the run's parallax-eval, and the eval."""
-    path = run_dir / EVAL
-    if not path.is_file():
+    path = run_dir / EVAL  # or its compressed form
+    if record_file(path) is None:
         raise ReplayError(f"{run_dir} has no {EVAL}: run parallax-eval on it first")
-    result = json.loads(path.read_text())
+    result = json.loads(read_record(path))
     grid = result["greedy_samples"]["grid"]
     return np.asarray(grid["pans"], dtype=np.float64), np.asarray(grid["distances"]), result
 

@@ -27,6 +27,7 @@ from parallax.config import READOUT_PANS, distance_readout, load_run_config
 from parallax.experiment import distance_learner
 from parallax.metrics import DistanceErrorTracker, learn_online
 from parallax.tools.replay import ReplayError, parse_sweep, read_stream
+from parallax.tools.report.runs import METRICS_NAME, record_file
 
 
 def trace(run_dir: str | Path, overrides: Sequence[str] = ()) -> list[dict]:
@@ -71,7 +72,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--worst", type=int, default=3, help="worst predictions to print")
     parser.add_argument("--out", help="write every row of every combination to this JSON file")
     args = parser.parse_args(argv)
-    if not (Path(args.run) / "metrics.jsonl").is_file():
+    if record_file(Path(args.run) / METRICS_NAME) is None:
         print(f"online_errors: error: {args.run} has no metrics.jsonl", file=sys.stderr)
         sys.exit(2)
     torch.set_num_threads(1)

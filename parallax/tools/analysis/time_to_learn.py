@@ -21,7 +21,7 @@ import numpy as np
 
 from parallax.config import load_run_config
 from parallax.metrics import EyeMovementTracker, position_label
-from parallax.tools.report.runs import read_metrics
+from parallax.tools.report.runs import METRICS_NAME, read_metrics, record_file
 
 
 def _target_table(pairs: set[tuple[float, float]]) -> dict[tuple[float, float], float]:
@@ -277,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    missing = [r for r in args.runs if not (Path(r) / "metrics.jsonl").is_file()]
+    missing = [r for r in args.runs if record_file(Path(r) / METRICS_NAME) is None]
     if missing:
         print(f"[time_to_learn] no metrics.jsonl in {missing[0]}", file=sys.stderr)
         return 2

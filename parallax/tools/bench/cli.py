@@ -44,6 +44,7 @@ from parallax.tools.bench.limits import (
     usable_cores,
 )
 from parallax.tools.bench.timing import cpu_seconds_by_role, seconds_between
+from parallax.writable import file_problem
 
 
 # --- end to end ----------------------------------------------------------------------------------
@@ -382,6 +383,13 @@ def main(argv: list[str] | None = None) -> None:
     if args.repeats < 1 or args.presentations < 1 or min(args.robots) < 1 or args.threads < 1:
         print(
             "parallax-bench: error: --repeats, --presentations, --robots and --threads must be ≥ 1",
+            file=sys.stderr,
+        )
+        sys.exit(2)
+    problem = file_problem(args.json) if args.json else None
+    if problem:  # before the measurements, which take minutes
+        print(
+            f"parallax-bench: error: --json {args.json} {problem}; choose another file",
             file=sys.stderr,
         )
         sys.exit(2)

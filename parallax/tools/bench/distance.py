@@ -6,9 +6,9 @@ is accepted, and the candidate evaluations. SciPy's MINPACK (``least_squares(met
 gets the same residuals and the same torch Jacobian from the same start and stops after
 ``SCIPY_MAX_NFEV`` residual evaluations (running it to convergence takes tens of seconds);
 our LM is then timed for the same number of Jacobian evaluations as SciPy used, and both
-sums of squares are reported. MINPACK refuses fewer residuals than parameters (300 < 541), so
-its residual vector is padded with zeros, which changes neither the sum of squares nor the
-steps.
+sums of squares are reported. MINPACK sees the weight decay λ‖w‖² as P more residuals √λ·w.
+It refuses fewer residuals than parameters (300 < 541), so without the decay its residual
+vector is padded with zeros, which changes neither the sum of squares nor the steps.
 """
 
 from __future__ import annotations
@@ -64,20 +64,23 @@ def _scipy_fit(
 ) -> tuple[float, float, int]:
     """(milliseconds, SSE, Jacobian evaluations) of MINPACK from ``start``."""
     batch = (inputs, targets)
-    padding = max(optimizer.num_params - targets.numel(), 0)
+    root_decay, params = float(np.sqrt(optimizer.weight_decay)), optimizer.num_params
+    decay_rows = params if root_decay else 0
+    padding = max(params - targets.numel() - decay_rows, 0)
 
     def residuals(flat: np.ndarray) -> np.ndarray:
         with torch.no_grad():
             values = optimizer._residuals(
                 torch.from_numpy(flat), _regression_residuals, batch
             ).numpy()
-        return np.concatenate([values, np.zeros(padding)])
+        return np.concatenate([values, root_decay * flat[:decay_rows], np.zeros(padding)])
 
     def jacobian(flat: np.ndarray) -> np.ndarray:
         values = optimizer._jacobian(
             torch.from_numpy(flat), _regression_residuals, batch, True
         ).numpy()
-        return np.concatenate([values, np.zeros((padding, values.shape[1]))])
+        decay = root_decay * np.eye(params)[:decay_rows]
+        return np.concatenate([values, decay, np.zeros((padding, params))])
 
     begin = time.perf_counter()
     solution = least_squares(
@@ -122,8 +125,11 @@ def run(repeats: int = 50) -> dict[str, float]:
     with torch.no_grad():
         errors = optimizer._residuals(start, _regression_residuals, (inputs, targets)).double()
 
+    decay, weights = optimizer.weight_decay, start.double()
+
     def damped_solve() -> None:
-        _DampedSolver(full_jacobian, errors, full_jacobian.T @ errors)(start_mu)
+        gradient = full_jacobian.T @ errors + decay * weights
+        _DampedSolver(full_jacobian, errors, gradient, decay, weights)(start_mu)
 
     for _ in range(3):  # warm-up
         restore(), epoch(), jacobian(), damped_solve()
@@ -155,7 +161,7 @@ def run(repeats: int = 50) -> dict[str, float]:
         scipy_jacobians=float(scipy_jacobians),
         lm_same_jacobians_ms=1e3 * (time.perf_counter() - begin),
         lm_same_jacobians_sse=ours.sse,
-        start_sse=float(errors.square().sum()),
+        start_sse=optimizer._objective(errors, start),
     )
     return results
 

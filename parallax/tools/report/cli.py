@@ -28,6 +28,7 @@ from pathlib import Path
 
 from parallax.tools.report.build import TABLE_CHOICES, build_report
 from parallax.tools.report.runs import ReportError
+from parallax.writable import folder_problem
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -69,6 +70,9 @@ def main(argv: list[str] | None = None) -> None:
     )
     args = parser.parse_args(argv)
     try:
+        problem = folder_problem(args.out) if args.out else None
+        if problem:
+            raise ReportError(f"--out {args.out}: {problem}; choose another folder")
         notes = None
         if args.notes:
             notes_path = Path(args.notes)

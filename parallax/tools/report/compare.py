@@ -1,8 +1,9 @@
-"""The paper's Tables 2–5 in three columns: the published number, the paper's algorithm as
-written run in parallax (``experiment=paper_<setup>``), and ours (``experiment=recipe_<setup>``);
-and, for every 5–20 cm model, the evaluations a sceptic would ask for.
+"""The paper's Tables 2–5 in three columns: the published number, the paper's algorithm with the
+settings it leaves open chosen by us, run in parallax (``experiment=unsourced_<setup>``), and ours
+(``experiment=recipe_<setup>``); and, for every 5–20 cm model, the evaluations a sceptic would ask
+for.
 
-    python -m parallax.tools.report.compare docs/results/paper.json docs/results/recipe.json
+    python -m parallax.tools.report.compare docs/results/unsourced.json docs/results/recipe.json
         --out docs/results
 
 It reads the JSON that `parallax-report --tables paper` wrote for each family (launch/
@@ -24,8 +25,11 @@ from parallax.tools.report.groups import Stat, json_ready
 from parallax.tools.report.runs import ReportError, total_error
 from parallax.tools.report.tables import md_table
 
-#: The columns beside the paper's, and what each family's experiment files are.
-FAMILIES = ("paper as written", "ours")
+#: The columns beside the paper's: the unsourced family (the paper's algorithm, its open settings
+#: chosen by us) and the recipe.
+FAMILIES = ("unsourced", "ours")
+#: Their headers in the README's table.
+README_HEADERS = ("paper's algorithm, open settings ours (unsourced_*)", "ours (recipe)")
 TEXTURES_PHOTOGRAPHS = "held-out photographs"
 
 
@@ -231,8 +235,8 @@ def _published_range(table: dict, column: str) -> str:
 
 def readme_table(data: dict) -> str:
     """The README's summary: Tables 2–3 as ranges over the lateral positions, Tables 4–5's
-    totals; the paper, the paper's algorithm as written, ours."""
-    header = ["", "paper (published)", "paper's algorithm, run in parallax", "ours (recipe)"]
+    totals; the paper, the paper's algorithm with its open settings chosen by us, ours."""
+    header = ["", "paper (published)", *README_HEADERS]
     rows = []
     for key, table, what in (
         ("table2", paper.TABLE2, "Table 2: eye error"),
@@ -281,10 +285,10 @@ def readme_block(readme: Path) -> str:
     return text.split(README_BEGIN, 1)[1].split(README_END, 1)[0].strip()
 
 
-def compare(paper_json: str | Path | None, ours_json: str | Path) -> tuple[str, dict]:
-    # the paper's algorithm as written, not run yet: an empty column
-    as_written = _load(paper_json) if paper_json is not None else _NOT_RUN
-    families = dict(zip(FAMILIES, (as_written, _load(ours_json)), strict=True))
+def compare(unsourced_json: str | Path | None, ours_json: str | Path) -> tuple[str, dict]:
+    # the unsourced family, not run: an empty column
+    unsourced = _load(unsourced_json) if unsourced_json is not None else _NOT_RUN
+    families = dict(zip(FAMILIES, (unsourced, _load(ours_json)), strict=True))
     # the leave-one-out report (launch/reproduce.sh without) sits beside the families' JSON
     leave_one_out = (
         "what each improvement buys is in [leave_one_out.md](leave_one_out.md)."
@@ -292,21 +296,25 @@ def compare(paper_json: str | Path | None, ours_json: str | Path) -> tuple[str, 
         else "what each improvement buys (`bash launch/reproduce.sh without`) is not yet made."
     )
     md = [
-        "# The paper, the paper's algorithm as written, and ours: Tables 2–5",
+        "# The paper, the paper's algorithm with its open settings chosen by us, and ours: "
+        "Tables 2–5",
         "",
         "Made by `python -m parallax.tools.report.compare` from "
-        f"{f'`{paper_json}`' if paper_json else 'nothing yet'} (the paper's algorithm as "
-        "written, `experiment=paper_<setup>`) and "
+        f"{f'`{unsourced_json}`' if unsourced_json else 'nothing'} (the unsourced family: the "
+        "paper's algorithm with the settings it leaves open chosen by us, "
+        "`experiment=unsourced_<setup>`) and "
         f"`{ours_json}` (our recipe, `experiment=recipe_<setup>`), which `parallax-report` "
-        "wrote from the runs of `bash launch/reproduce.sh`. Cells: mean ± sd over seeds (n "
-        "seeds); the paper's published number beside them. Each family's own report, with "
-        "every run, its figures in the manner of Figs. 7–11 and its failed jobs, is the "
-        f"Markdown beside its JSON ([{Path(paper_json or 'paper.json').stem}.md]"
-        f"({Path(paper_json or 'paper.json').stem}.md), [{Path(ours_json).stem}.md]"
+        "wrote from the runs of `bash launch/reproduce.sh`. The paper family "
+        "(`experiment=paper_<setup>`, those settings taken from the code the paper builds on) "
+        "is not part of this report. Cells: mean ± sd over seeds (n seeds); the paper's "
+        "published number beside them. Each family's own report, with every run, its figures "
+        "in the manner of Figs. 7–11 and its failed jobs, is the Markdown beside its JSON "
+        f"([{Path(unsourced_json or 'unsourced.json').stem}.md]"
+        f"({Path(unsourced_json or 'unsourced.json').stem}.md), [{Path(ours_json).stem}.md]"
         f"({Path(ours_json).stem}.md)); {leave_one_out}",
         "",
     ]
-    data: dict = {"inputs": [str(paper_json), str(ours_json)]}
+    data: dict = {"inputs": [str(unsourced_json), str(ours_json)]}
     worse_all: list[str] = []
     worse_md: list[str] = []
     for key, number, what, table in (
@@ -359,7 +367,7 @@ def main(argv: list[str] | None = None) -> None:
         prog="python -m parallax.tools.report.compare", description=__doc__.split("\n\n")[0]
     )
     parser.add_argument(
-        "paper_json", help="parallax-report's JSON of the paper family ('-': not run yet)"
+        "unsourced_json", help="parallax-report's JSON of the unsourced family ('-': not run)"
     )
     parser.add_argument("ours_json", help="parallax-report's JSON of the recipe family")
     parser.add_argument("--out", default=None, help="folder for the Markdown and compare.json")
@@ -372,7 +380,9 @@ def main(argv: list[str] | None = None) -> None:
     )
     args = parser.parse_args(argv)
     try:
-        text, data = compare(None if args.paper_json == "-" else args.paper_json, args.ours_json)
+        text, data = compare(
+            None if args.unsourced_json == "-" else args.unsourced_json, args.ours_json
+        )
         if args.readme is not None:
             readme = Path(args.readme)
             if README_BEGIN not in readme.read_text():

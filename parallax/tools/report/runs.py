@@ -1,6 +1,11 @@
 """Loading finished runs for `parallax-report`: one job directory of `parallax-train` (its
 config, `summary.json`, `metrics.jsonl` and the `eval.json` files of `parallax-eval`) as a `Run`.
 
+A record may be kept compressed (`metrics.jsonl.xz`, `eval.json.gz`, …: the committed runs in
+docs/results are, by `python -m parallax.tools.report.compact`); every reader here takes either
+form, and names the record by its plain name (`eval_files`), so what the tools write does not
+depend on it.
+
 The numbers it reads are the paper's measures: the last-100-trial eye error of Tables 2–3 and
 the distance error per range of Tables 4–5, before and after §5's perturbation. A job directory
 with a config but no summary is a failed or unfinished job: it gets a `problem`, never an
@@ -9,7 +14,9 @@ exception, so that the report can list it.
 
 from __future__ import annotations
 
+import gzip
 import json
+import lzma
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +35,35 @@ METRICS_NAME = "metrics.jsonl"
 RUN_CONFIG_NAME = "config.yaml"
 HYDRA_CONFIG = Path(".hydra") / "config.yaml"
 HYDRA_OVERRIDES = Path(".hydra") / "overrides.yaml"
+
+
+#: The compressed forms of a record a reader takes, by suffix, in the order they are looked for.
+COMPRESSED = {".xz": lzma.open, ".gz": gzip.open}
+
+
+def record_file(path: Path | str) -> Path | None:
+    """The file that holds the record ``path`` (say RUN/metrics.jsonl): the plain file, else its
+    compressed form (``metrics.jsonl.xz`` or ``.gz``), else None. The plain file wins: the tools
+    write plain files, so one beside a compressed copy is the newer record."""
+    path = Path(path)
+    for suffix in ("", *COMPRESSED):
+        candidate = path.with_name(path.name + suffix)
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def read_record(path: Path | str) -> str:
+    """The text of the record ``path``, plain or compressed (:func:`record_file`); a
+    FileNotFoundError naming ``path`` when there is neither."""
+    found = record_file(path)
+    if found is None:
+        raise FileNotFoundError(f"{path}: no such file, plain or compressed")
+    opener = COMPRESSED.get(found.suffix)
+    if opener is None:
+        return found.read_text()
+    with opener(found, "rt", encoding="utf-8") as handle:
+        return handle.read()
 
 
 class ReportError(ValueError):
@@ -54,7 +90,8 @@ def _load_yaml(path: Path) -> Any:
 
 
 def _load_json(path: Path) -> Any:
-    return json.loads(path.read_text())  # the trainer writes NaN for empty ranges; json reads it
+    # the trainer writes NaN for empty ranges; json reads it
+    return json.loads(read_record(path))
 
 
 @dataclass
@@ -191,8 +228,8 @@ def _progress(path: Path, total: int | None) -> str:
     """'12 of 400 presentations logged' from the last line of metrics.jsonl."""
     metrics = path / METRICS_NAME
     done = 0
-    if metrics.is_file():
-        lines = [line for line in metrics.read_text().splitlines() if line.strip()]
+    if record_file(metrics) is not None:
+        lines = [line for line in read_record(metrics).splitlines() if line.strip()]
         if lines:
             try:
                 done = int(json.loads(lines[-1]).get("presentation", 0))
@@ -204,12 +241,13 @@ def _progress(path: Path, total: int | None) -> str:
 
 
 def eval_files(path: Path) -> list[Path]:
-    """eval.json in the run directory and one level below (parallax-eval --out RUN/SUBDIR)."""
-    files = [path / EVAL_NAME] if (path / EVAL_NAME).is_file() else []
+    """eval.json in the run directory and one level below (parallax-eval --out RUN/SUBDIR), each
+    by its plain name, also when it is kept compressed (read it with :func:`read_record`)."""
+    files = [path / EVAL_NAME] if record_file(path / EVAL_NAME) is not None else []
     for sub in sorted(
         p for p in path.iterdir() if p.is_dir() and not p.name.startswith(".") and p.name != "tb"
     ):
-        if (sub / EVAL_NAME).is_file():
+        if record_file(sub / EVAL_NAME) is not None:
             files.append(sub / EVAL_NAME)
     return files
 
@@ -266,12 +304,13 @@ def load_run(path: Path) -> Run:
 
 
 def read_metrics(path: Path) -> list[dict]:
-    """metrics.jsonl's records; a torn last line (a run killed while writing) is skipped."""
-    metrics = path / METRICS_NAME
-    if not metrics.is_file():
+    """metrics.jsonl's records, plain or compressed (:func:`record_file`); a torn last line (a
+    run killed while writing) is skipped."""
+    metrics = Path(path) / METRICS_NAME
+    if record_file(metrics) is None:
         return []
     records = []
-    for line in metrics.read_text().splitlines():
+    for line in read_record(metrics).splitlines():
         try:
             records.append(json.loads(line))
         except json.JSONDecodeError:

@@ -1,0 +1,110 @@
+"""`python -m parallax.tools.analysis.convergence RUN...`: whether a run trained long enough, and
+whether its critic stayed bounded, read from its logged `metrics.jsonl`.
+
+A run of Tables 2–3 has two phases, before and after §5's perturbation. For each phase it prints
+the recent eye-movement MAE at the phase's end (eq. 16 over metrics.summary_trials trials, the
+tables' "last 100 trials", worst lateral position) and its trend: the mean of that figure over
+the phase's last ``--tail`` of presentations less its mean over the ``--tail`` before. A phase
+is flat when the trend is within ±``--flat`` degrees (means over blocks, so that the noise of a
+100-trial figure does not hide a flat end, nor a slow drift pass for one). Then the critic's
+scale, mean |v·φ| (peak and last; it grows without bound when the natural actor-critic
+diverges, paper §3.4) and the policy's entropy at the end (ln 7 ≈ 1.95 is uniform over the
+seven pan steps).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from parallax.tools.report.runs import read_metrics
+
+#: The share of a phase in each of the two blocks compared, and the trend (degrees) of a flat
+#: phase.
+TAIL, FLAT = 0.2, 0.02
+
+
+def _worst(record: dict) -> float:
+    return max(record["mae_recent_per_position"].values())
+
+
+def _phase(records: list[dict], tail: float, flat: float) -> dict | None:
+    if not records:
+        return None
+    block = max(1, round(len(records) * tail))
+    worst = [_worst(r) for r in records]
+    last, before = worst[-block:], worst[-2 * block : -block] or worst[-block:]
+    trend = sum(last) / len(last) - sum(before) / len(before)
+    return {
+        "presentations": len(records),
+        "mae_recent": worst[-1],
+        "trend": trend,
+        "flat": abs(trend) <= flat,
+    }
+
+
+def convergence(run_dir: str | Path, tail: float = TAIL, flat: float = FLAT) -> dict:
+    """{"before", "after": {presentations, mae_recent, trend, flat} or None, "critic_peak",
+    "critic_last", "entropy_last"} for one run directory."""
+    records = read_metrics(Path(run_dir))
+    if not records:
+        raise ValueError(f"{run_dir}: metrics.jsonl holds no presentations")
+    scales = [r["policy_critic_scale"] for r in records if "policy_critic_scale" in r]
+    return {
+        "before": _phase([r for r in records if not r.get("perturbed")], tail, flat),
+        "after": _phase([r for r in records if r.get("perturbed")], tail, flat),
+        "critic_peak": max(scales) if scales else None,
+        "critic_last": scales[-1] if scales else None,
+        "entropy_last": records[-1].get("policy_entropy"),
+    }
+
+
+def _cell(phase: dict | None) -> str:
+    if phase is None:
+        return "–"
+    mark = "flat" if phase["flat"] else "moving"
+    return f"{phase['mae_recent']:.3f}° ({mark}: {phase['trend']:+.3f}°, {phase['presentations']})"
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.tools.analysis.convergence", description=__doc__.split("\n")[0]
+    )
+    parser.add_argument("runs", nargs="+", help="run directories")
+    parser.add_argument("--tail", type=float, default=TAIL, help="share of each phase checked")
+    parser.add_argument(
+        "--flat", type=float, default=FLAT, help="degrees a flat phase's trend may reach"
+    )
+    parser.add_argument("--json", help="also write the figures to this file")
+    args = parser.parse_args(argv)
+    if not 0 < args.tail <= 1:
+        parser.error(f"--tail must lie in (0, 1], got {args.tail}")
+    results = {}
+    print("| run | before the perturbation | after | critic peak / last | entropy |")
+    print("|---|---|---|---|---|")
+    for run in args.runs:
+        try:
+            found = convergence(run, args.tail, args.flat)
+        except (OSError, ValueError) as error:
+            print(f"convergence: {error}", file=sys.stderr)
+            sys.exit(2)
+        results[run] = found
+        critic = (
+            "–"
+            if found["critic_peak"] is None
+            else f"{found['critic_peak']:.3g} / {found['critic_last']:.3g}"
+        )
+        entropy = found["entropy_last"]
+        print(
+            f"| {Path(run).name} | {_cell(found['before'])} | {_cell(found['after'])} | {critic} "
+            f"| {'–' if entropy is None else f'{entropy:.2f}'} |"
+        )
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

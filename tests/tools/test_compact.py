@@ -1,0 +1,122 @@
+"""Compressed run records (`python -m parallax.tools.report.compact`): every reader takes a
+compressed metrics.jsonl or eval.json as the plain one, and a report made from compacted runs is
+the one made from the plain runs, byte for byte."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import lzma
+import os
+
+import numpy as np
+import pytest
+
+from parallax.config import compose
+from parallax.tools.report.build import build_report
+from parallax.tools.report.compact import compact, compress, main
+from parallax.tools.report.runs import eval_files, load_run, read_metrics, read_record
+from tests.tools.test_report import write_eval, write_run
+
+PACK = {".gz": lambda data: gzip.compress(data, mtime=0), ".xz": lzma.compress}
+
+
+@pytest.mark.parametrize("suffix", [".gz", ".xz"])
+def test_read_metrics_reads_a_compressed_record_as_the_plain_one(tmp_path, suffix):
+    lines = [
+        {"presentation": 1, "mae": 0.5, "lm_loss": float("nan"), "pans": [[0.1, -0.25]]},
+        {"presentation": 2, "mae": 0.25, "mae_per_position": {"5": 0.1}, "distances": [3.3]},
+    ]
+    text = "".join(json.dumps(line) + "\n" for line in lines) + '{"presentation": 3, "ma'
+    plain, packed = tmp_path / "plain", tmp_path / "packed"
+    plain.mkdir()
+    packed.mkdir()
+    (plain / "metrics.jsonl").write_text(text)
+    (packed / f"metrics.jsonl{suffix}").write_bytes(PACK[suffix](text.encode()))
+    records = read_metrics(plain)
+    assert len(records) == 2  # the torn last line is skipped in both
+    assert json.dumps(read_metrics(packed)) == json.dumps(records)  # NaN included
+    assert read_record(packed / "metrics.jsonl") == text
+
+
+def _runs(root, rng):
+    cfg = compose(["experiment=recipe_multi_5_20_weighted", "train.presentations=10"])
+    for seed in range(2):
+        run = root / f"experiment=recipe_multi_5_20_weighted,seed={seed}"
+        write_run(run, cfg, seed, rng)
+        write_eval(run, rng, 5, False, sub="eval_before")
+        write_eval(run, rng, 10, True)
+    unfinished = root / "experiment=recipe_multi_5_20_weighted,seed=2"
+    write_run(unfinished, cfg, 2, rng)
+    (unfinished / "summary.json").unlink()
+    return sorted(root.iterdir())
+
+
+def _read(run):
+    loaded = load_run(run)
+    return json.dumps([loaded.summary, loaded.evals, loaded.problem, read_metrics(run)])
+
+
+def test_a_report_from_compacted_runs_is_the_plain_runs_report(tmp_path):
+    root = tmp_path / "runs"
+    runs = _runs(root, np.random.default_rng(3))
+    read_plain = [_read(run) for run in runs]
+    plain_texts = {p: p.read_text() for p in root.rglob("*") if p.suffix in (".json", ".jsonl")}
+    report_plain, _ = build_report([root], tmp_path / "plain", tables="paper")
+    os.utime(runs[0] / "eval.json", (1_000_000_000, 1_000_000_000))
+
+    runs_done, records, saved = compact([root])
+    assert (runs_done, records) == (2, 6) and saved > 0
+    finished = runs[:2]
+    for run in finished:
+        assert sorted(p.name for p in run.rglob("*") if p.is_file()) == [
+            "config.yaml",
+            "eval.json.xz",
+            "eval.json.xz",
+            "metrics.jsonl.xz",
+            "summary.json",
+        ]
+        assert eval_files(run) == [run / "eval.json", run / "eval_before" / "eval.json"]
+    # the unfinished run keeps its plain log (the trainer resumes from it)
+    assert (runs[2] / "metrics.jsonl").is_file()
+    assert (runs[0] / "eval.json.xz").stat().st_mtime == 1_000_000_000  # the eval's time, kept
+    for path, text in plain_texts.items():
+        assert read_record(path) == text
+    assert [_read(run) for run in runs] == read_plain
+
+    report_packed, _ = build_report([root], tmp_path / "packed", tables="paper")
+    assert report_packed == report_plain
+    for name in ("README.md", "results.json"):
+        assert (tmp_path / "packed" / name).read_bytes() == (tmp_path / "plain" / name).read_bytes()
+
+    # again: nothing to do; the same record always compresses to the same bytes
+    packed = (runs[1] / "metrics.jsonl.xz").read_bytes()
+    assert compact([root])[1] == 0
+    assert compress(plain_texts[runs[1] / "metrics.jsonl"].encode(), ".xz") == packed
+
+
+def test_a_plain_record_beside_a_compressed_one_is_the_newer(tmp_path, capsys):
+    root = tmp_path / "runs"
+    run = _runs(root, np.random.default_rng(5))[0]
+    compact([root])
+    newer = {"presentations": 10, "perturbed": True, "note": "evaluated again"}
+    (run / "eval.json").write_text(json.dumps(newer))  # parallax-eval writes plain files
+    assert load_run(run).evals[0]["note"] == "evaluated again"
+    main([str(root), "--format", "gz"])  # converts, and the new eval replaces the old one
+    assert "2 finished runs: 6 records compressed (gz)" in capsys.readouterr().out
+    assert sorted(p.name for p in run.iterdir() if "eval" in p.name) == [
+        "eval.json.gz",
+        "eval_before",
+    ]
+    assert json.loads(read_record(run / "eval.json"))["note"] == "evaluated again"
+    assert (
+        gzip.decompress((run / "metrics.jsonl.gz").read_bytes())
+        == read_record(run / "metrics.jsonl").encode()
+    )
+
+
+def test_compact_names_a_path_that_holds_no_run(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([str(tmp_path / "missing")])
+    assert exc.value.code == 1
+    assert "missing does not exist" in capsys.readouterr().err
