@@ -46,14 +46,36 @@ def _phase(records: list[dict], tail: float, flat: float) -> dict | None:
     }
 
 
-def convergence(run_dir: str | Path, tail: float = TAIL, flat: float = FLAT) -> dict:
+def blocks(records: list[dict], size: int) -> list[dict]:
+    """The worst position's recent MAE averaged over consecutive blocks of ``size``
+    presentations: [{"first", "last", "mae", "perturbed"}], a learning curve that the noise of
+    single 100-trial figures does not hide."""
+    curve = []
+    for start in range(0, len(records), size):
+        block = records[start : start + size]
+        curve.append(
+            {
+                "first": block[0]["presentation"],
+                "last": block[-1]["presentation"],
+                "mae": sum(_worst(r) for r in block) / len(block),
+                "perturbed": bool(block[-1].get("perturbed")),
+            }
+        )
+    return curve
+
+
+def convergence(
+    run_dir: str | Path, tail: float = TAIL, flat: float = FLAT, block: int | None = None
+) -> dict:
     """{"before", "after": {presentations, mae_recent, trend, flat} or None, "critic_peak",
-    "critic_last", "entropy_last"} for one run directory."""
+    "critic_last", "entropy_last", and with ``block`` "blocks" (see :func:`blocks`)} for one
+    run directory."""
     records = read_metrics(Path(run_dir))
     if not records:
         raise ValueError(f"{run_dir}: metrics.jsonl holds no presentations")
     scales = [r["policy_critic_scale"] for r in records if "policy_critic_scale" in r]
     return {
+        **({"blocks": blocks(records, block)} if block else {}),
         "before": _phase([r for r in records if not r.get("perturbed")], tail, flat),
         "after": _phase([r for r in records if r.get("perturbed")], tail, flat),
         "critic_peak": max(scales) if scales else None,
@@ -78,16 +100,23 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument(
         "--flat", type=float, default=FLAT, help="degrees a flat phase's trend may reach"
     )
+    parser.add_argument(
+        "--blocks",
+        type=int,
+        help="also print the learning curve in blocks of this many presentations",
+    )
     parser.add_argument("--json", help="also write the figures to this file")
     args = parser.parse_args(argv)
     if not 0 < args.tail <= 1:
         parser.error(f"--tail must lie in (0, 1], got {args.tail}")
+    if args.blocks is not None and args.blocks < 1:
+        parser.error(f"--blocks must be a positive number of presentations, got {args.blocks}")
     results = {}
     print("| run | before the perturbation | after | critic peak / last | entropy |")
     print("|---|---|---|---|---|")
     for run in args.runs:
         try:
-            found = convergence(run, args.tail, args.flat)
+            found = convergence(run, args.tail, args.flat, args.blocks)
         except (OSError, ValueError) as error:
             print(f"convergence: {error}", file=sys.stderr)
             sys.exit(2)
@@ -102,6 +131,14 @@ def main(argv: Sequence[str] | None = None) -> None:
             f"| {Path(run).name} | {_cell(found['before'])} | {_cell(found['after'])} | {critic} "
             f"| {'–' if entropy is None else f'{entropy:.2f}'} |"
         )
+    for run, found in results.items():
+        if "blocks" in found:
+            curve = ", ".join(
+                f"{b['first']}–{b['last']}{' (perturbed)' if b['perturbed'] else ''}: "
+                f"{b['mae']:.3f}°"
+                for b in found["blocks"]
+            )
+            print(f"\n{Path(run).name}, mean recent MAE by block: {curve}")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
 

@@ -1,0 +1,50 @@
+"""python -m parallax.tools.analysis.convergence: phases, trends, learning curve, critic scale."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from parallax.tools.analysis import convergence
+
+
+def _run(tmp_path, maes, perturbed_from, scales):
+    records = [
+        {
+            "presentation": i + 1,
+            "perturbed": i >= perturbed_from,
+            "mae_recent_per_position": {"5": mae, "10": mae / 2},
+            "policy_critic_scale": scale,
+            "policy_entropy": 1.5,
+        }
+        for i, (mae, scale) in enumerate(zip(maes, scales))
+    ]
+    (tmp_path / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    return tmp_path
+
+
+def test_a_falling_phase_moves_and_a_level_one_is_flat(tmp_path):
+    falling = [1.0 - 0.01 * i for i in range(50)]
+    level = [0.2] * 50
+    run = _run(tmp_path, falling + level, 50, [0.1] * 99 + [3.0])
+    found = convergence.convergence(run, tail=0.2, flat=0.02, block=25)
+    assert found["before"]["presentations"] == 50 and not found["before"]["flat"]
+    assert found["before"]["trend"] == pytest.approx(-0.1)  # two blocks of 10, 10 apart
+    assert found["after"]["flat"] and found["after"]["mae_recent"] == 0.2
+    assert found["critic_peak"] == 3.0 and found["critic_last"] == 3.0
+    curve = found["blocks"]
+    assert [b["first"] for b in curve] == [1, 26, 51, 76]
+    assert curve[0]["mae"] == pytest.approx(sum(falling[:25]) / 25)
+    assert [b["perturbed"] for b in curve] == [False, False, True, True]
+
+
+def test_the_command_prints_a_row_per_run_and_refuses_a_missing_record(tmp_path, capsys):
+    run = _run(tmp_path, [0.3] * 10, 5, [0.1] * 10)
+    convergence.main([str(run), "--blocks", "5"])
+    out = capsys.readouterr().out
+    assert f"| {run.name} | 0.300° (flat: +0.000°, 5) |" in out
+    assert "mean recent MAE by block" in out
+    with pytest.raises(SystemExit) as stop:
+        convergence.main([str(tmp_path / "missing")])
+    assert stop.value.code == 2
