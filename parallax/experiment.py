@@ -6,7 +6,7 @@ each lateral position l_p of L, t_h iterations of
     render → retina → coder (state θ, reward −(eC+eF)) → policy update → action → dictionary update
 
 and the pan reached at the last iteration is q_p. The vector s = [q1 … qr] and the distance go
-to the distance learner. This module builds the four parts from a composed config and runs
+to the distance learner. This module holds the parts of :func:`parallax.parts.build` and runs
 presentations (:meth:`Experiment.run_presentation`, the loop; :mod:`parallax.lockstep` schedules
 its steps on threads); `parallax.trainer` adds the schedule, metrics, logging and checkpoints,
 and `parallax.tools.evaluate` the frozen measurements.
@@ -21,15 +21,23 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import torch
-from hydra.utils import instantiate
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
-import parallax.envs
 from parallax.coding import CoderOutput
-from parallax.distance.planner import MovementPlanner
-from parallax.envs.walk import Walker, walk_robots
+from parallax.envs.walk import walk_robots
 from parallax.lockstep import Lockstep, robot_turns, stack_images
 from parallax.metrics import position_label
+from parallax.parts import body_walkers, build, distance_learner, seeds_for, truths_at, worlds
+
+__all__ = [  # the parts' builders, for the tools that build one part alone
+    "Experiment",
+    "Presentation",
+    "body_walkers",
+    "distance_learner",
+    "seeds_for",
+    "truths_at",
+    "worlds",
+]
 
 
 @dataclass
@@ -62,64 +70,6 @@ class Presentation:
         return [position_label(l) for l in self.lateral_positions]
 
 
-def seeds_for(seed: int, count: int) -> list[int]:
-    """Independent integer seeds for the parts of one run, from one user-facing seed."""
-    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(int(seed)).spawn(count)]
-
-
-def distance_learner(cfg: DictConfig):
-    """The run's distance learner (paper §3.5), fresh, with the seed its run gives it: the
-    seeds are one per robot's world, then the coder's, the policy's and the learner's."""
-    robots = int(cfg.env.robots)
-    return instantiate(
-        cfg.distance,
-        lateral_positions=[float(l) for l in cfg.curriculum.lateral_positions],
-        seed=seeds_for(cfg.seed, robots + 3)[robots + 2],
-    )
-
-
-def worlds(cfg: DictConfig, lateral_positions: list[float], stimuli_split: str | None = None):
-    """The run's B worlds (``parallax.envs.load``), unperturbed, robot b's with the run's b-th
-    seed; ``stimuli_split`` replaces env.stimuli.split (parallax-eval: heldout)."""
-    env_kwargs = OmegaConf.to_container(cfg.env, resolve=True)
-    robots = int(env_kwargs.pop("robots"))
-    env_kwargs.pop("robots_per_turn")  # the order of the robots' turns: Experiment
-    env_kwargs.pop("walk")  # the body's walk: parallax.envs.walk, body_walkers
-    if stimuli_split is not None:
-        env_kwargs["stimuli"] = {**env_kwargs["stimuli"], "split": stimuli_split}
-    seeds = seeds_for(cfg.seed, robots + 3)
-    return [
-        parallax.envs.load(
-            seed=seeds[b],
-            lateral_positions=lateral_positions,
-            camera_rotation_deg=0.0,
-            blur_sigma=0.0,
-            rotation_axis=cfg.perturbation.rotation_axis,
-            **env_kwargs,
-        )
-        for b in range(robots)
-    ]
-
-
-def body_walkers(cfg: DictConfig) -> list[Walker]:
-    """Each robot's walk to the panel (env.walk; beyond the paper, §7), with its own slip stream:
-    from the run's seed after the worlds', the coder's, the policy's and the learner's, so those
-    stay as they were."""
-    robots = int(cfg.env.robots)
-    seeds = seeds_for(seeds_for(cfg.seed, robots + 4)[robots + 3], robots)
-    options = OmegaConf.to_container(cfg.env.walk, resolve=True)
-    options.pop("growth_start_fraction")  # the trainer's schedule (parallax.config.growth_start)
-    return [Walker(seed=seed, **options) for seed in seeds]
-
-
-def truths_at(source, walker: Walker, physics, distances) -> np.ndarray:
-    """A perfect odometry learner's answers for panels at ``distances``: ``source``'s truth of
-    the slip-free walk of ``walker``'s body as it is now (parallax-eval and parallax-replay)."""
-    return np.array(
-        [source.truth(d, walker.reach_strides(physics, d)) for d in distances], dtype=np.float64
-    )
-
-
 class Experiment:
     """The world(s), coder, policy and distance learner of one run, built from a config."""
 
@@ -142,35 +92,15 @@ class Experiment:
         self.robots = int(cfg.env.robots)
         self.robots_per_turn = int(cfg.env.robots_per_turn)
         self.trial_length = int(cfg.env.trial_length)
-        # One seed per robot's world, then the coder, the policy and the distance learner.
-        seeds = seeds_for(cfg.seed, self.robots + 3)
-        self.envs = worlds(cfg, self.stages[0], stimuli_split)
-        self.coder = instantiate(
-            cfg.coder, image_size=int(cfg.env.image_size), seed=seeds[self.robots]
-        ).to(self.device)
-        self.policy = instantiate(
-            cfg.policy,
-            state_dim=self.coder.state_dim,
-            num_scales=len(cfg.coder.scales),
-            seed=seeds[self.robots + 1],
-        ).to(self.device)
-        self.distance = distance_learner(cfg)
-        if hasattr(self.distance, "to"):  # DistanceLearner.to, or an nn.Module
-            self.distance.to(self.device)
-        self.walkers = body_walkers(cfg)
-        # beyond the paper (§7): the robot plans its route; its own stream decides when it
-        # sweeps all of L instead, from the run's seed after the walkers'
-        self.planner: MovementPlanner | None = None
-        if cfg.movement.route == "planned":
-            self.planner = MovementPlanner(
-                self.lateral_positions,
-                queue_size=int(cfg.distance.queue_size),
-                price_per_trial=float(cfg.movement.price_per_trial),
-                price_per_cm=float(cfg.movement.price_per_cm),
-            )
-        self.explore_random = np.random.RandomState(
-            seeds_for(cfg.seed, self.robots + 5)[self.robots + 4] % 2**32
+        self.parts = build(cfg, stimuli_split)
+        self.envs = self.parts.worlds
+        self.coder, self.policy, self.distance = (
+            self.parts.coder,
+            self.parts.policy,
+            self.parts.distance,
         )
+        self.walkers, self.planner = self.parts.walkers, self.parts.planner
+        self.explore_random = self.parts.explore
         self.stage = 0
 
     # --- curriculum and perturbation -------------------------------------------------------
@@ -200,7 +130,7 @@ class Experiment:
     @property
     def walks(self) -> bool:
         """Whether the distance learner's targets need walks (distance.targets=odometry)."""
-        return bool(getattr(getattr(self.distance, "target_source", None), "walks", False))
+        return self.distance.target_source.walks
 
     def walk(self) -> tuple[list[float | None], list[float]]:
         """After a sweep: each robot walks to its panel with probability

@@ -4,11 +4,17 @@ The disparity score is the horizontal shift, in pixels, of the stimulus between 
 image I0 (taken at l0) and the first image at lateral position l, before any eye movement:
 score = f·l/d. The camera's focal length is chosen so that the paper's Table 1 follows from it
 at d = 3 m: round(531·l/3) = 9, 12, 18, 23, 27, 35 px for l = 5, 7, 10, 13, 15, 20 cm.
+
+The eye's action set A (§3.4) is here too, the one constant that the world, the policy and the
+schema share.
 """
 
 from __future__ import annotations
 
 import math
+
+#: The paper's action set A: pan increments in degrees per iteration (§3.4).
+ACTION_SET_DEG = (-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2)
 
 #: Focal length of the eye cameras in pixels (for every image size; see ``parallax.envs``).
 FOCAL_LENGTH_PX = 531.0

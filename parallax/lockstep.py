@@ -27,9 +27,10 @@ and waiting for the helper's); the rest of its time is what the caller does betw
 
 Every value is computed as in the plain sequence — each iteration, turn by turn: encode, learn,
 act, step; then the dictionary step — in the same order per robot and per dictionary
-(``tests/test_experiment.py`` runs that sequence beside it), so the results do not depend on the
-schedule — with one torch thread (``train.threads=1``, the default): with more, the matrix
-library may split a product of a chunk's rows otherwise than one of all rows.
+(:func:`parallax.loop.presentation` is that sequence; ``tests/test_experiment.py`` runs it
+beside the lockstep), so the results do not depend on the schedule — with one torch thread
+(``train.threads=1``, the default): with more, the matrix library may split a product of a
+chunk's rows otherwise than one of all rows.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from parallax import lockstep
+from parallax import lockstep, loop
 from parallax.config import compose
 from parallax.experiment import Experiment
 
@@ -37,58 +37,6 @@ def _presentations(overrides: list[str], chunk: int, monkeypatch, count: int = 2
         exp.close()
 
 
-def _plain_presentation(exp: Experiment) -> tuple[np.ndarray, float]:
-    """The paper's loop written plainly on this thread, the robots in their turns: every world
-    resets, then each iteration, turn by turn, the encoding of the turn's images, the policy's
-    update and action and the turn's worlds stepped one after the other; after the last turn the
-    dictionary step from every turn's encoding. Returns the pans q_p (B, r) and the mean reward,
-    as a Presentation reports them."""
-
-    def images(observations, key):
-        return torch.from_numpy(np.stack([o[key] for o in observations]))
-
-    timesteps = [env.reset() for env in exp.envs]
-    exp.coder.set_reference(images([ts.observation for ts in timesteps], "reference"))
-    lateral = list(exp.envs[0].task.lateral_positions)
-    final_pans = np.zeros((exp.robots, len(lateral)))
-    reward_sum, encodings = 0.0, 0
-    turns = lockstep.robot_turns(exp.robots, exp.robots_per_turn)
-    reference: list = [None] * len(turns)
-    previous: list = [None] * len(turns)
-    last = False
-    while not last:
-        encoded = []
-        for k, robots in enumerate(turns):
-            obs = [ts.observation for ts in timesteps[robots]]
-            iteration, p = int(obs[0]["iteration"]), int(obs[0]["position_index"])
-            if iteration == 0 and exp.policy.uses_reference_state:
-                reference[k] = exp.coder.encode(images(obs, "reference"), robots).output.state
-            encoding = exp.coder.encode(images(obs, "image"), robots)
-            encoded.append(encoding)
-            out = encoding.output
-            reward_sum, encodings = reward_sum + float(out.reward.sum()), encodings + len(obs)
-            pans = np.array([float(o["pan"]) for o in obs])
-            rewards = out.reward.numpy().astype(np.float64)
-            change = None if iteration == 0 else (rewards, *previous[k][2:])
-            state = exp.policy.state(out.state, reference[k], pans, lateral[p], change)
-            if iteration > 0:
-                valid = torch.ones(len(obs), dtype=torch.bool)
-                exp.policy.update(*previous[k][:2], out.reward, state, valid)
-            if iteration == exp.trial_length - 1:
-                final_pans[robots, p] = pans
-            last = timesteps[robots][0].last()
-            if last:
-                continue
-            action = exp.policy.act(state)
-            increments = exp.policy.action_values[action].numpy()
-            previous[k] = (state, action, rewards, increments)
-            for b, increment in zip(range(robots.start, robots.stop), increments, strict=True):
-                timesteps[b] = exp.envs[b].step(float(increment))
-        if exp.coder.learn:
-            exp.coder.learn_from(encoded)
-    return final_pans, reward_sum / encodings
-
-
 def _assert_same_states(first: dict, second: dict) -> None:
     assert first.keys() == second.keys()
     for name, value in first.items():
@@ -96,12 +44,17 @@ def _assert_same_states(first: dict, second: dict) -> None:
             assert torch.equal(value, second[name]), name
 
 
+def _assert_same_presentation(a, b) -> None:
+    for field in ("pans", "best_pans", "targets", "start_pans", "distances", "textures"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=field)
+    assert a.reward == b.reward and a.errors == b.errors and a.policy_stats == b.policy_stats
+    assert a.steps == b.steps and a.route == b.route
+
+
 def _assert_same(first, second) -> None:
     (presentations_a, _, coder_a, policy_a), (presentations_b, _, coder_b, policy_b) = first, second
     for a, b in zip(presentations_a, presentations_b, strict=True):
-        for field in ("pans", "best_pans", "targets", "start_pans", "distances", "textures"):
-            np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=field)
-        assert a.reward == b.reward and a.errors == b.errors and a.policy_stats == b.policy_stats
+        _assert_same_presentation(a, b)
     _assert_same_states(coder_a, coder_b)
     _assert_same_states(policy_a, policy_b)
 
@@ -136,24 +89,46 @@ def test_the_lockstep_gives_the_numbers_of_the_plain_loop(
     tiny_overrides, robots, extra, monkeypatch
 ) -> None:
     # the lockstep: GL thread, chunks of 2, the dictionary step on the helper thread during the
-    # policy's turn; the plain loop: everything on this thread, one call per step
+    # policy's turn; the plain loop (parallax.loop.presentation): everything on this thread
     monkeypatch.setattr(lockstep, "ENCODE_CHUNK", 2)
     cfg = compose(tiny_overrides + [f"env.robots={robots}", "env.initial_pan_jitter_deg=1", *extra])
     scheduled, plain = Experiment(cfg), Experiment(cfg)
     try:
-        for _ in range(2):
-            presentation = scheduled.run_presentation()
-            pans, reward = _plain_presentation(plain)
-            np.testing.assert_array_equal(presentation.pans, pans)
-            assert presentation.reward == reward
+        for learn in (True, True, False):
+            presentation = scheduled.run_presentation(learn=learn)
+            reference = loop.presentation(plain, learn=learn)
+            _assert_same_presentation(presentation, reference)
             # the loop's thread accounts for its waits in the lockstep, not for the plain loop
             assert list(presentation.waits) == list(lockstep.WAITS)
             assert all(seconds >= 0 for seconds in presentation.waits.values())
             assert presentation.waits["encoding"] > 0
-        assert len(set(pans.ravel().tolist())) > 1  # the robots moved
+        assert len(set(reference.pans.ravel().tolist())) > 1  # the robots moved
         _assert_same_states(scheduled.coder.state_dict(), plain.coder.state_dict())
         _assert_same_states(scheduled.policy.state_dict(), plain.policy.state_dict())
         assert scheduled.policy.updates.item() > 0
+    finally:
+        scheduled.close()
+        plain.close()
+
+
+def test_a_route_gives_the_numbers_of_the_plain_loop(tiny_overrides) -> None:
+    """A route the loop asks "where next?" (here: the last position of L, then the first)."""
+    cfg = compose(tiny_overrides + ["curriculum=multi_5_10"])
+    scheduled, plain = Experiment(cfg), Experiment(cfg)
+
+    def route(visited, so_far):
+        chosen = [len(so_far.lateral_positions) - 1, 0, None][len(visited)]
+        if visited:  # the trial just ended is in the record, q_p of the position visited
+            assert np.isfinite(so_far.pans[0, visited[-1]])
+        return chosen
+
+    try:
+        for _ in range(2):
+            presentation = scheduled.run_presentation(route=route)
+            _assert_same_presentation(presentation, loop.presentation(plain, route=route))
+            assert presentation.route == [len(presentation.lateral_positions) - 1, 0]
+        _assert_same_states(scheduled.coder.state_dict(), plain.coder.state_dict())
+        _assert_same_states(scheduled.policy.state_dict(), plain.policy.state_dict())
     finally:
         scheduled.close()
         plain.close()

@@ -36,9 +36,29 @@ def run_name(override_dirname: str) -> str:
     return name
 
 
+def config_groups() -> str:
+    """The config groups of ``parallax-train --help`` and their options, one group a line: the
+    files of conf/, without the schema's internal nodes (each group's ``schema``) and Hydra's
+    own groups."""
+    from importlib.resources import files
+
+    lines = []
+    for group in sorted(files(CONFIG_MODULE).iterdir(), key=lambda path: path.name):
+        if not group.is_dir() or group.name in ("hydra", "__pycache__"):
+            continue
+        options = sorted(
+            f.name.removesuffix(".yaml") for f in group.iterdir() if f.name.endswith(".yaml")
+        )
+        if options:
+            lines.append(f"{group.name}: {', '.join(options)}")
+    return "\n".join(lines)
+
+
 def register_resolvers() -> None:
     if not OmegaConf.has_resolver("run_name"):
         OmegaConf.register_new_resolver("run_name", run_name)
+    if not OmegaConf.has_resolver("config_groups"):
+        OmegaConf.register_new_resolver("config_groups", config_groups)
 
 
 def compose(overrides: Sequence[str] = (), with_hydra: bool = False) -> DictConfig:

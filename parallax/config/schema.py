@@ -17,6 +17,8 @@ from typing import Any
 
 from omegaconf import MISSING
 
+from parallax.geometry import ACTION_SET_DEG
+
 #: The paper's lateral list for multiple positions 5–20 cm in 1 cm steps (§4.2.1), in metres.
 LATERAL_5_20_M = [round(0.05 + 0.01 * i, 2) for i in range(16)]
 #: The name under which each group's schema node is stored (conf/<group>/ files extend it).
@@ -79,7 +81,8 @@ class WalkConfig:
 class EnvConfig:
     """The world (§4.1): HOAP-3-like humanoid, textured panel, still background, in MuJoCo.
 
-    The keyword arguments of ``parallax.envs.load`` (``robots`` and ``robots_per_turn`` aside);
+    The keyword arguments of ``parallax.envs.load``, which reads its defaults here (``robots``,
+    ``robots_per_turn`` and ``walk`` aside: parallax.parts.NOT_THE_WORLDS);
     the lateral list L comes from ``curriculum`` and the perturbation from ``perturbation``.
     """
 
@@ -172,7 +175,7 @@ class PolicyConfig:
     #: Filled by the trainer: the coder's number of scales.
     num_scales: int = MISSING
     #: The action set A, pan increments in degrees (§3.4).
-    actions: list[float] = field(default_factory=lambda: [-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2])
+    actions: list[float] = field(default_factory=lambda: list(ACTION_SET_DEG))
     #: α_v, the critic's step size (the paper gives no step sizes).
     critic_lr: float = 1.0
     #: α_n, the advantage weights' step size (the published pursuit setting: 0.025).
@@ -433,7 +436,7 @@ class Config:
     curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
     perturbation: PerturbationConfig = field(default_factory=PerturbationConfig)
     movement: MovementConfig = field(default_factory=MovementConfig)
-    #: The run's seed; every component's seed is derived from it (parallax.experiment.seeds_for).
+    #: The run's seed; every component's seed is derived from it (parallax.parts.Seeds).
     seed: int = 0
     #: cpu | cuda | cuda:<n>: where the coder, policy and distance learner live (the world
     #: renders through MuJoCo and hands its frames over in host memory).

@@ -24,11 +24,11 @@ from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
 
+from parallax.config.schema import EnvConfig, PerturbationConfig
 from parallax.envs.hoap3 import Physics, check_distance
 from parallax.envs.stimuli import load_stimuli
+from parallax.geometry import ACTION_SET_DEG
 
-#: The paper's action set A (degrees of pan per iteration).
-ACTION_SET_DEG = (-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2)
 #: The paper's distance grid (§4.1): 3.0, 3.1, …, 10.0 m.
 PAPER_DISTANCES = {"start": 3.0, "stop": 10.0, "step": 0.1}
 
@@ -372,22 +372,27 @@ class PursuitEnvironment(control.Environment):
         self.physics.close_renderer()
 
 
+#: The defaults of :func:`load`: the schema's world and its unperturbed camera, written once.
+_WORLD, _CAMERA = EnvConfig(), PerturbationConfig()
+
+
 def load(
     seed: int | None = None,
     lateral_positions: Sequence[float] = (0.05,),
-    trial_length: int = 30,
+    trial_length: int = _WORLD.trial_length,
     distances: Sequence[float] | Mapping[str, float] | None = None,
     stimuli: Mapping[str, Any] | None = None,
-    image_size: int = 256,
-    pan_reset: bool = True,
-    camera_rotation_deg: float = 0.0,
-    rotation_axis: str | Sequence[float] = "optical",
-    blur_sigma: float = 0.0,
-    max_pan_increment_deg: float = max(ACTION_SET_DEG),
-    *,
-    initial_pan_jitter_deg: float,
+    image_size: int = _WORLD.image_size,
+    pan_reset: bool = _WORLD.pan_reset,
+    camera_rotation_deg: float = _CAMERA.camera_rotation_deg,
+    rotation_axis: str | Sequence[float] = _CAMERA.rotation_axis,
+    blur_sigma: float = _CAMERA.blur_sigma,
+    max_pan_increment_deg: float = _WORLD.max_pan_increment_deg,
+    initial_pan_jitter_deg: float = _WORLD.initial_pan_jitter_deg,
 ) -> PursuitEnvironment:
-    """The HOAP-3 lateral-pursuit world as a dm_control environment (see the module docstring).
+    """The HOAP-3 lateral-pursuit world as a dm_control environment (see the module docstring);
+    ``load(seed=0)`` is the default task, every default the schema's (EnvConfig; ``distances``
+    None: the paper's grid, ``stimuli`` None: the built-in set).
 
     ``stimuli``: {"source": "skimage" | "dir" | "procedural", "split": "train" | "heldout",
     "count": int | None, "dir": folder, "resolution": texels, "seed": int, "kind": "dead_leaves" |

@@ -35,10 +35,11 @@ import numpy as np
 import torch
 from torch import nn
 
+from parallax.geometry import ACTION_SET_DEG
 from parallax.policy.features import FeatureNormalizer, PolicyInputs
 
-#: The paper's pan increments in degrees (§3.4).
-PAPER_ACTIONS_DEG = (-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2)
+#: The paper's pan increments in degrees (§3.4): the action set of parallax.geometry.
+PAPER_ACTIONS_DEG = ACTION_SET_DEG
 #: How the updates of B robots' rows combine (see the module docstring).
 ROBOT_UPDATES = ("mean", "in_turn")
 #: The statistics :meth:`NaturalActorCritic.update` reports as one tensor, in its order.

@@ -135,16 +135,16 @@ def test_run_time_values_stay_missing():
 
 
 def test_the_world_factory_defaults_are_the_schemas():
-    """parallax.envs.load's defaults are the schema's env (and perturbation) settings; the pan
-    jitter, whose recipe default is beyond the paper, has none: every caller says it."""
+    """parallax.envs.load's defaults are the schema's env (and perturbation) settings, so that
+    ``load(seed=0)`` is the default task (dm_control's ``suite.load`` convention)."""
     import parallax.envs
     from parallax.config.schema import EnvConfig, PerturbationConfig
 
     defaults = _defaults(parallax.envs.load)
     env = OmegaConf.to_container(OmegaConf.structured(EnvConfig))
     perturbation = OmegaConf.to_container(OmegaConf.structured(PerturbationConfig))
-    assert "initial_pan_jitter_deg" not in defaults
-    for key in ("trial_length", "image_size", "pan_reset", "max_pan_increment_deg"):
+    keys = ("trial_length", "image_size", "pan_reset", "max_pan_increment_deg")
+    for key in (*keys, "initial_pan_jitter_deg"):
         assert _plain(defaults[key]) == env[key], key
     for key in ("camera_rotation_deg", "rotation_axis", "blur_sigma"):
         assert _plain(defaults[key]) == perturbation[key], key
