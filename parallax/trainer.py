@@ -41,6 +41,7 @@ from parallax.config import (
 from parallax.experiment import Experiment, Presentation
 from parallax.health import Diverged, Health
 from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, learn_online, position_label
+from parallax.record import PresentationRecord, Route, Walks
 
 
 class Trainer:
@@ -155,26 +156,26 @@ class Trainer:
         return True
 
     # --- one presentation ------------------------------------------------------------------
-    def _learn_distance(self, pres: Presentation) -> dict:
+    def _learn_distance(self, pres: Presentation) -> Walks | None:
         """The distance learner's step after a presentation; with odometry targets, the walks
-        first. Returns what the walks were, for the log ({} without)."""
+        first. Returns what the walks were, for the log (None without)."""
         pans = getattr(pres, READOUT_PANS[distance_readout(self.cfg)])
-        walked: dict = {}
+        walked = None
         if self.exp.walks:
             counted, reach = self.exp.walk()
             source = self.exp.distance.target_source
             truths = [source.truth(d, r) for d, r in zip(pres.distances, reach)]
             stride, nominal = self.exp.walkers[0].true_stride_m, source.nominal_stride_m
-            walked = {
-                "walk_strides": counted,
-                "reach_strides": reach,
+            walked = Walks(
+                walk_strides=counted,
+                reach_strides=reach,
                 # what the robot believes it walked against what it walked, in %
-                "odometry_error_pct": [
+                odometry_error_pct=[
                     None if n is None else 100.0 * (n * nominal / (r * stride) - 1.0)
                     for n, r in zip(counted, reach)
                 ],
-                "true_stride_m": stride,
-            }
+                true_stride_m=stride,
+            )
             stats = learn_online(
                 self.exp.distance, self.dist, pans, truths, counted, distances=pres.distances
             )
@@ -185,23 +186,23 @@ class Trainer:
         self.distance_fitted = bool(stats.get("trained"))
         return walked
 
-    def _route_record(self, pres: Presentation, key: str, learnt_distance: bool) -> dict:
+    def _route_record(self, pres: Presentation, key: str, learnt_distance: bool) -> Route:
         """A planned route's log entries, and its estimate scored online (a sweep's is the
         network's, in ``distance_error``)."""
         lateral_cm = [100.0 * l for l in pres.lateral_positions]
         visited = list(range(len(lateral_cm))) if pres.route is None else pres.route
-        record = {
-            "route": pres.route,
-            "trials": len(visited),
-            "travel_cm": 2.0 * max(lateral_cm[k] for k in visited),
-        }
+        estimate = None
         if pres.route is not None and learnt_distance:
             pans = getattr(pres, key)[0]
             estimate = self.exp.planner.estimate(pres.route, pans[pres.route])
             self.route_dist.record(estimate, float(pres.distances[0]))
-            record["route_estimate"] = estimate
-        record["route_distance_error"] = self.route_dist.by_range()
-        return record
+        return Route(
+            route=pres.route,
+            trials=len(visited),
+            travel_cm=2.0 * max(lateral_cm[k] for k in visited),
+            route_distance_error=self.route_dist.by_range(),
+            estimate=estimate,
+        )
 
     def _maybe_advance_stage(self) -> None:
         if self.exp.on_final_list:
@@ -213,7 +214,7 @@ class Trainer:
         if enough and all(mae[k] <= float(cur.advance_below_deg) for k in stage):
             self.exp.set_stage(self.exp.stage + 1)
 
-    def step_presentation(self, keep_view: bool) -> tuple[Presentation, dict]:
+    def step_presentation(self, keep_view: bool) -> tuple[Presentation, PresentationRecord]:
         # the random start pan only during train.start_jitter_presentations, then pan 0 as in the
         # paper; derived from the count, so a resumed run switches at the same presentation
         jittered = start_jitter_on(self.cfg, self.presentation)
@@ -227,7 +228,7 @@ class Trainer:
             for p in visited:
                 self.eye.record(pres.labels[p], pres.pans[b, p], pres.targets[b, p])
         learnt_distance = self.exp.on_final_list
-        walked = moved = {}
+        walked, moved = None, None
         self.distance_fitted = False
         if learnt_distance and pres.route is None:
             walked = self._learn_distance(pres)
@@ -239,40 +240,32 @@ class Trainer:
         self.presentation += 1
         self.steps += pres.steps
         self._maybe_advance_stage()
-        record = {
-            "presentation": self.presentation,
-            "steps": self.steps,
-            "stage": self.exp.stage,
-            "perturbed": ran_perturbed,
-            "reward": pres.reward,
-            **{f"e_{k}": v for k, v in pres.errors.items()},
-            **{f"policy_{k}": v for k, v in pres.policy_stats.items()},
-            "mae": self.eye.mae(),
-            "mae_per_position": self.eye.mae_per_position(),
-            "mae_recent": self.eye.recent_mae(int(self.cfg.metrics.summary_trials)),
-            # Tables 2–3's window per position, for python -m parallax.tools.analysis.time_to_learn
-            "mae_recent_per_position": {
+        record = PresentationRecord(
+            presentation=self.presentation,
+            steps=self.steps,
+            stage=self.exp.stage,
+            perturbed=ran_perturbed,
+            reward=pres.reward,
+            errors=pres.errors,
+            policy_stats=pres.policy_stats,
+            mae=self.eye.mae(),
+            mae_per_position=self.eye.mae_per_position(),
+            mae_recent=self.eye.recent_mae(int(self.cfg.metrics.summary_trials)),
+            mae_recent_per_position={
                 k: v["mean"]
                 for k, v in self.eye.last_trials(int(self.cfg.metrics.summary_trials)).items()
             },
-            "distance_error": self.dist.by_range(),
-            # The eye-movement vectors s and their distances, exactly (JSON floats round-trip), so
-            # parallax-replay can re-run the distance learner alone with another y, c or weighting.
-            "pans": pres.pans.tolist(),
-            "distances": pres.distances.tolist(),
-            # each trial's pan where the coder's reward peaked (train.distance_readout=best_reward)
-            "best_pans": pres.best_pans.tolist(),
-            # where each trial started (the paper: 0), and whether it was drawn from the jitter
-            "start_pans": pres.start_pans.tolist(),
-            "start_jitter": jittered,
-            "learnt_distance": learnt_distance,
-            # with distance.targets=odometry: each robot's strides to the panel (None: it did not
-            # walk), the slip-free count, and the odometry's error
-            **walked,
-            # with movement.route=planned: where the robot went (indices into L; null: a sweep)
-            **moved,
-            **{f"lm_{k}": v for k, v in self.last_distance_stats.items()},
-        }
+            distance_error=self.dist.by_range(),
+            pans=pres.pans.tolist(),
+            distances=pres.distances.tolist(),
+            best_pans=pres.best_pans.tolist(),
+            start_pans=pres.start_pans.tolist(),
+            start_jitter=jittered,
+            learnt_distance=learnt_distance,
+            walks=walked,
+            route=moved,
+            distance_stats=dict(self.last_distance_stats),
+        )
         return pres, record
 
     @property
@@ -311,39 +304,6 @@ class Trainer:
         }
 
     # --- the run ---------------------------------------------------------------------------
-    def _log_scalars(self, writer: SummaryWriter, record: dict, steps_per_second: float) -> None:
-        step = self.steps
-        writer.add_scalar("coder/reward", record["reward"], step)
-        for k, v in record.items():
-            if k.startswith("e_"):
-                writer.add_scalar(f"coder/error_{k[2:]}", v, step)
-            elif k.startswith("policy_"):
-                writer.add_scalar(f"policy/{k[7:]}", v, step)
-            elif k.startswith("lm_"):
-                writer.add_scalar(f"distance/lm_{k[3:]}", v, step)
-        writer.add_scalar("pursuit/mae", record["mae"], step)
-        writer.add_scalar("pursuit/mae_recent", record["mae_recent"], step)
-        for label, v in record["mae_per_position"].items():
-            writer.add_scalar(f"pursuit/mae_{label}cm", v, step)
-        for rng, v in record["distance_error"].items():
-            writer.add_scalar(f"distance/error_pct_{rng}", v, step)
-        writer.add_scalar("perf/steps_per_second", steps_per_second, step)
-        writer.add_scalar("curriculum/stage", record["stage"], step)
-        if "route" in record:
-            writer.add_scalar("movement/sweep", float(record["route"] is None), step)
-            writer.add_scalar("movement/trials", record["trials"], step)
-            writer.add_scalar("movement/travel_cm", record["travel_cm"], step)
-            for rng, v in record["route_distance_error"].items():
-                writer.add_scalar(f"movement/route_error_pct_{rng}", v, step)
-        if "walk_strides" in record:
-            counted = [n for n in record["walk_strides"] if n is not None]
-            writer.add_scalar("walk/walks", len(counted), step)
-            writer.add_scalar("walk/true_stride_m", record["true_stride_m"], step)
-            if counted:
-                writer.add_scalar("walk/strides", float(np.mean(counted)), step)
-                errors = [e for e in record["odometry_error_pct"] if e is not None]
-                writer.add_scalar("walk/odometry_error_pct", float(np.mean(errors)), step)
-
     def _log_images(self, writer: SummaryWriter, pres: Presentation) -> None:
         for scale in self.exp.coder.scales:
             grid = np.asarray(self.exp.coder.atom_grid(scale))
@@ -408,28 +368,30 @@ class Trainer:
                     dt = time.perf_counter() - t0
                     self.wall_time += dt
                     sps = pres.steps * self.exp.robots / dt
-                    log.write(json.dumps(record) + "\n")
+                    line = record.to_json()
+                    log.write(json.dumps(line) + "\n")
                     log.flush()
-                    self._log_scalars(writer, record, sps)
+                    for tag, value in record.scalars(sps):
+                        writer.add_scalar(tag, value, self.steps)
                     skipped = self.skipped_updates()
-                    self.health.report(record, skipped, self.distance_fitted, writer, self.steps)
+                    self.health.report(line, skipped, self.distance_fitted, writer, self.steps)
                     if keep_view:
                         self._log_images(writer, pres)
-                    dist_total = record["distance_error"].get("total")
+                    dist_total = record.distance_error.get("total")
                     if interactive:
                         bar.set_postfix(
                             steps_s=f"{sps:.0f}",
-                            mae=f"{record['mae']:.3f}",
-                            recent=f"{record['mae_recent']:.3f}",
+                            mae=f"{record.mae:.3f}",
+                            recent=f"{record.mae_recent:.3f}",
                             dist=f"{dist_total:.2f}%" if dist_total is not None else "-",
                         )
                         bar.update(1)
                     elif self.presentation % log_every == 0 or self.presentation == total:
                         print(
                             f"[parallax] presentation {self.presentation}/{total}  "
-                            f"steps/s {sps:.0f}  MAE {record['mae']:.3f}° "
+                            f"steps/s {sps:.0f}  MAE {record.mae:.3f}° "
                             f"(last {int(cfg.metrics.summary_trials)} trials "
-                            f"{record['mae_recent']:.3f}°)  distance error "
+                            f"{record.mae_recent:.3f}°)  distance error "
                             + (f"{dist_total:.2f}%" if dist_total is not None else "-"),
                             flush=True,
                         )
