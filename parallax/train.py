@@ -1,7 +1,7 @@
 """`parallax-train`: the Hydra application that runs the paper's whole loop (Fig. 1).
 
     parallax-train                                   # our recipe (parallax/config/schema.py)
-    parallax-train experiment=paper_multi_5_20       # the paper's algorithm as written
+    parallax-train experiment=paper_multi_5_20       # the paper's algorithm
     parallax-train curriculum=multi_5_10 distance.y=2 coder.scales=[coarse]
     parallax-train -m seed=0,1,2 hydra/launcher=joblib
 
