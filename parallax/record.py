@@ -10,7 +10,7 @@ order are part of the run's files: a committed run's metrics.jsonl is compared b
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -27,12 +27,7 @@ class Walks:
     true_stride_m: float
 
     def to_json(self) -> dict:
-        return {
-            "walk_strides": self.walk_strides,
-            "reach_strides": self.reach_strides,
-            "odometry_error_pct": self.odometry_error_pct,
-            "true_stride_m": self.true_stride_m,
-        }
+        return asdict(self)  # the fields, in their order, are the line's keys
 
     def scalars(self) -> Iterator[tuple[str, float]]:
         counted = [n for n in self.walk_strides if n is not None]

@@ -222,7 +222,7 @@ class LevenbergMarquardt:
         epochs: int,
         per_sample: bool = False,
         validation: Callable[[], float] | None = None,
-        max_fail: int = 6,
+        max_fail: int | None = None,
     ) -> LMRunResult:
         """Up to ``epochs`` epochs; stops early at min_grad or mu_max.
 
@@ -233,6 +233,8 @@ class LevenbergMarquardt:
         """
         if int(epochs) != epochs or epochs < 1:
             raise ValueError(f"epochs must be a positive integer, got {epochs!r}")
+        if validation is not None and (max_fail is None or max_fail < 1):
+            raise ValueError(f"a validation stop needs max_fail ≥ 1, got {max_fail!r}")
         accepted = 0
         result = None
         if validation is not None:

@@ -306,7 +306,24 @@ def test_each_fit_splits_the_queue_as_dividerand_and_stops_on_validation():
     # never on its epoch budget
     assert all(s["epochs"] < 1000 for s in fitted)
     assert sum(s["stopped_max_fail"] for s in fitted) > 0
-    assert learner.optimizer.mu == learner.optimizer.initial_mu or learner.reset_mu
+
+
+@pytest.mark.parametrize("reset_mu", [True, False])
+def test_reset_mu_starts_every_fit_from_lm_mu(reset_mu):
+    """MATLAB's train starts each call from mu = 0.001: a μ left by the last fit then changes
+    nothing; carried over, it does."""
+    pans, distances = paper_regression(45, np.random.default_rng(8), lateral_positions_m=SMALL_L)
+    learners = [small_learner(reset_mu=reset_mu) for _ in range(2)]
+    for learner in learners:
+        feed(learner, pans[:44], distances[:44])
+    learners[1].optimizer.mu = 1e4  # as if the last fit had ended with a large μ
+    for learner in learners:
+        feed(learner, pans[44:], distances[44:])
+    same = all(
+        torch.equal(a, b)
+        for a, b in zip(learners[0].network.parameters(), learners[1].network.parameters())
+    )
+    assert same == reset_mu
 
 
 def test_the_split_stream_resumes_bit_identically():
