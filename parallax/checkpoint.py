@@ -157,10 +157,11 @@ def read(
     """The checkpoint at ``path``, checked: a whole torch file holding a dict with every key of
     :data:`REQUIRED_KEYS` and, when it records the settings it was trained with and ``config``
     (a composed config) is given, written with the same ones (the changes a resume may make
-    aside). Anything else raises :class:`CheckpointError`."""
+    aside). Anything else raises :class:`CheckpointError`. The recorded settings come back in
+    this parallax's words (:func:`parallax.config.upgrade_saved`)."""
     from omegaconf import OmegaConf
 
-    from parallax.config import changed_settings
+    from parallax.config import changed_settings, upgrade_saved
 
     path = Path(path)
     try:
@@ -185,6 +186,8 @@ def read(
         raise CheckpointError(
             path, f"lacks {', '.join(missing)} (not a checkpoint of parallax-train)"
         )
+    if isinstance(state.get("config"), dict):
+        state["config"] = upgrade_saved(state["config"])
     if config is not None and isinstance(state.get("config"), dict):
         changed = changed_settings(OmegaConf.create(state["config"]), config)
         if changed:

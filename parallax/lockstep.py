@@ -1,16 +1,13 @@
-"""How the steps of B robots are scheduled on threads (paper §3.2, Fig. 3; no equation of its own).
+"""An executor of the paper's loop (:func:`parallax.loop.presentation`) for B robots on threads.
 
-:meth:`parallax.experiment.Experiment.run_presentation` reads as the paper's sequence
-
-    render → retina → coder → policy update and act → dictionary step
-
-and calls a :class:`Lockstep` for the parts that run on other threads:
+The loop asks it for the steps that touch the worlds and the dictionaries; :class:`Lockstep`
+runs them so that rendering, encoding and the dictionary step overlap:
 
 * the robots take their turns in groups (``env.robots_per_turn``, :func:`robot_turns`): each
   turn's frames are encoded, then its robots' transitions update the policy and the policy acts
   for them, and its worlds step (on the GL thread, where MuJoCo renders without the GIL) while
   the later turns are encoded and act. So a turn's frames render during the other turns' work,
-  and the policy's turns, in which only this thread would work, overlap the rendering;
+  and the policy's turns, in which only the loop's thread works, overlap the rendering;
 * a turn's robots are encoded chunk by chunk as their frames arrive (:func:`encode_chunk`: 4
   robots at a time on the CPU, all of them in one call on a GPU);
 * the dictionary step of an iteration, from every turn's encoding, runs on the coder's helper
@@ -21,16 +18,14 @@ and calls a :class:`Lockstep` for the parts that run on other threads:
 
 :attr:`Lockstep.seconds` adds up where the calling thread spent its time in the lockstep:
 waiting for the frames it encodes, waiting for the dictionary step, and encoding (its own scale,
-and waiting for the helper's); the rest of its time is what the caller does between the calls
-(the policy's turn) and a presentation's start (its worlds' resets and the references' patches).
-``parallax-bench`` prints it per lockstep iteration, to show which part holds a step up.
+and waiting for the helper's); the rest of its time is the loop's own (the policy's turn) and a
+presentation's start (its worlds' resets and the references' patches). ``parallax-bench`` prints
+it per lockstep iteration, to show which part holds a step up.
 
-Every value is computed as in the plain sequence — each iteration, turn by turn: encode, learn,
-act, step; then the dictionary step — in the same order per robot and per dictionary
-(:func:`parallax.loop.presentation` is that sequence; ``tests/test_experiment.py`` runs it
-beside the lockstep), so the results do not depend on the schedule — with one torch thread
-(``train.threads=1``, the default): with more, the matrix library may split a product of a
-chunk's rows otherwise than one of all rows.
+Every value is that of :class:`parallax.loop.InOrder`, the plain sequence on one thread — in the
+same order per robot and per dictionary, so the results do not depend on the schedule
+(``tests/test_experiment.py``) — with one torch thread (``train.threads=1``, the default): with
+more, the matrix library may split a product of a chunk's rows otherwise than one of all rows.
 """
 
 from __future__ import annotations
@@ -77,7 +72,6 @@ class Frames(NamedTuple):
 
     observations: list[dict]
     output: CoderOutput
-    last: bool  # the presentation's last iteration (the robots cross it together)
 
 
 def stack_images(observations: Sequence[dict], key: str, device: torch.device) -> torch.Tensor:
@@ -181,5 +175,4 @@ class Lockstep:
         return Frames(
             observations=[ts.observation for ts in timesteps],
             output=CoderOutput.join([encoding.output for encoding in encodings]),
-            last=timesteps[0].last(),
         )

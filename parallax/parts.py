@@ -63,12 +63,12 @@ def run_seeds(cfg: DictConfig) -> Seeds:
     return Seeds.of(int(cfg.seed), int(cfg.env.robots))
 
 
-def distance_learner(cfg: DictConfig) -> DistanceLearner:
+def distance_learner(cfg: DictConfig, seeds: Seeds | None = None) -> DistanceLearner:
     """The run's distance learner (paper §3.5), fresh, with its seed of the run's tree."""
     return instantiate(
         cfg.distance,
         lateral_positions=[float(l) for l in cfg.curriculum.lateral_positions],
-        seed=run_seeds(cfg).distance,
+        seed=(seeds or run_seeds(cfg)).distance,
     )
 
 
@@ -78,7 +78,12 @@ def world_settings(cfg: DictConfig) -> dict:
     return {key: value for key, value in env.items() if key not in NOT_THE_WORLDS}
 
 
-def worlds(cfg: DictConfig, lateral_positions: list[float], stimuli_split: str | None = None):
+def worlds(
+    cfg: DictConfig,
+    lateral_positions: list[float],
+    stimuli_split: str | None = None,
+    seeds: Seeds | None = None,
+):
     """The run's B worlds (``parallax.envs.load``), unperturbed, robot b's with its seed of the
     run's tree; ``stimuli_split`` replaces env.stimuli.split (parallax-eval: heldout)."""
     settings = world_settings(cfg)
@@ -93,11 +98,11 @@ def worlds(cfg: DictConfig, lateral_positions: list[float], stimuli_split: str |
             rotation_axis=cfg.perturbation.rotation_axis,
             **settings,
         )
-        for seed in run_seeds(cfg).worlds
+        for seed in (seeds or run_seeds(cfg)).worlds
     ]
 
 
-def body_walkers(cfg: DictConfig) -> list[Walker]:
+def body_walkers(cfg: DictConfig, seeds: Seeds | None = None) -> list[Walker]:
     """Each robot's walk to the panel (env.walk; beyond the paper, §7), with its own slip
     stream. env.walk.growth_start_fraction is the trainer's schedule, not the body's."""
     walk = cfg.env.walk
@@ -109,7 +114,7 @@ def body_walkers(cfg: DictConfig) -> list[Walker]:
             substeps=int(walk.substeps),
             growth_factor=float(walk.growth_factor),
         )
-        for seed in run_seeds(cfg).walkers
+        for seed in (seeds or run_seeds(cfg)).walkers
     ]
 
 
@@ -141,13 +146,13 @@ def build(cfg: DictConfig, stimuli_split: str | None = None) -> Parts:
     seeds = run_seeds(cfg)
     lateral = [float(l) for l in cfg.curriculum.lateral_positions]
     first_list = [float(l) for l in (cfg.curriculum.get("stages") or [lateral])[0]]
-    envs = worlds(cfg, first_list, stimuli_split)
+    envs = worlds(cfg, first_list, stimuli_split, seeds)
     coder = instantiate(cfg.coder, image_size=int(cfg.env.image_size), seed=seeds.coder)
     coder = coder.to(device)
     policy = instantiate(
         cfg.policy, state_dim=coder.state_dim, num_scales=len(cfg.coder.scales), seed=seeds.policy
     ).to(device)
-    distance = distance_learner(cfg).to(device)
+    distance = distance_learner(cfg, seeds).to(device)
     planner = None
     if cfg.movement.route == "planned":
         planner = MovementPlanner(
@@ -161,7 +166,7 @@ def build(cfg: DictConfig, stimuli_split: str | None = None) -> Parts:
         coder=coder,
         policy=policy,
         distance=distance,
-        walkers=body_walkers(cfg),
+        walkers=body_walkers(cfg, seeds),
         planner=planner,
         explore=np.random.RandomState(seeds.explore),
         seeds=seeds,

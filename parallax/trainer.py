@@ -19,15 +19,11 @@ run with :class:`parallax.health.Diverged`.
 from __future__ import annotations
 
 import json
-import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
-from torch.utils.tensorboard import SummaryWriter
-from tqdm import tqdm
 
 from parallax import checkpoint
 from parallax.config import (
@@ -38,25 +34,33 @@ from parallax.config import (
     perturbation_start,
     start_jitter_on,
 )
-from parallax.experiment import Experiment, Presentation
+from parallax.distance_step import distance_step
+from parallax.experiment import Experiment
 from parallax.health import Diverged, Health
-from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, learn_online, position_label
-from parallax.record import PresentationRecord, Route, Walks
+from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, position_label
+from parallax.movement import movement
+from parallax.parts import Parts
+from parallax.presentation import Presentation
+from parallax.record import PresentationRecord
+from parallax.run_log import RunLog
 
 
 class Trainer:
-    def __init__(self, cfg: DictConfig, run_dir: str | Path):
+    """Trains one run into ``run_dir``: the parts of ``cfg`` (built unless given), the distance
+    step of its distance.targets and the movement of its movement.route."""
+
+    def __init__(self, cfg: DictConfig, run_dir: str | Path, parts: Parts | None = None):
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         if int(cfg.train.threads) > 0:
             torch.set_num_threads(int(cfg.train.threads))
-        self.exp = Experiment(cfg)
+        self.exp = Experiment(cfg, parts=parts)
+        self.learn_distance = distance_step(self.exp.parts)
+        self.movement = movement(cfg, self.exp.parts)
         self.eye = EyeMovementTracker(
             self.exp.lateral_positions, window=int(cfg.metrics.mae_window)
         )
         self.dist = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
-        # beyond the paper (§7): the planned routes' estimates, apart from the sweeps' network
-        self.route_dist = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
         self.presentation = 0
         self.steps = 0
         self.wall_time = 0.0
@@ -107,7 +111,7 @@ class Trainer:
             "before_perturbation": self.before_perturbation,
             "last_distance_stats": self.last_distance_stats,
             "global_rng": checkpoint.global_rng_state(),
-            **({"route_dist": self.route_dist.state_dict()} if self.exp.planner else {}),
+            **self.movement.state_dict(),  # a planned route's own distance errors
             # the settings it was trained with, so that it is never resumed or evaluated as
             # another run's (checkpoint.read)
             "config": OmegaConf.to_container(self.cfg, resolve=True),
@@ -131,8 +135,7 @@ class Trainer:
             self.exp.load_state_dict(state["experiment"])
             self.eye.load_state_dict(state["eye"])
             self.dist.load_state_dict(state["dist"])
-            if self.exp.planner is not None:
-                self.route_dist.load_state_dict(state["route_dist"])
+            self.movement.load_state_dict(state)
             if state.get("health") is not None:
                 self.health.load_state_dict(state["health"])
         except (KeyError, RuntimeError, TypeError, ValueError, IndexError) as exc:
@@ -156,90 +159,31 @@ class Trainer:
         return True
 
     # --- one presentation ------------------------------------------------------------------
-    def _learn_distance(self, pres: Presentation) -> Walks | None:
-        """The distance learner's step after a presentation; with odometry targets, the walks
-        first. Returns what the walks were, for the log (None without)."""
-        pans = getattr(pres, READOUT_PANS[distance_readout(self.cfg)])
-        walked = None
-        if self.exp.walks:
-            counted, reach = self.exp.walk()
-            source = self.exp.distance.target_source
-            truths = [source.truth(d, r) for d, r in zip(pres.distances, reach)]
-            stride, nominal = self.exp.walkers[0].true_stride_m, source.nominal_stride_m
-            walked = Walks(
-                walk_strides=counted,
-                reach_strides=reach,
-                # what the robot believes it walked against what it walked, in %
-                odometry_error_pct=[
-                    None if n is None else 100.0 * (n * nominal / (r * stride) - 1.0)
-                    for n, r in zip(counted, reach)
-                ],
-                true_stride_m=stride,
-            )
-            stats = learn_online(
-                self.exp.distance, self.dist, pans, truths, counted, distances=pres.distances
-            )
-        else:
-            stats = learn_online(self.exp.distance, self.dist, pans, pres.distances)
-        if stats:
-            self.last_distance_stats = stats
-        self.distance_fitted = bool(stats.get("trained"))
-        return walked
-
-    def _route_record(self, pres: Presentation, key: str, learnt_distance: bool) -> Route:
-        """A planned route's log entries, and its estimate scored online (a sweep's is the
-        network's, in ``distance_error``)."""
-        lateral_cm = [100.0 * l for l in pres.lateral_positions]
-        visited = list(range(len(lateral_cm))) if pres.route is None else pres.route
-        estimate = None
-        if pres.route is not None and learnt_distance:
-            pans = getattr(pres, key)[0]
-            estimate = self.exp.planner.estimate(pres.route, pans[pres.route])
-            self.route_dist.record(estimate, float(pres.distances[0]))
-        return Route(
-            route=pres.route,
-            trials=len(visited),
-            travel_cm=2.0 * max(lateral_cm[k] for k in visited),
-            route_distance_error=self.route_dist.by_range(),
-            estimate=estimate,
-        )
-
-    def _maybe_advance_stage(self) -> None:
-        if self.exp.on_final_list:
-            return
-        cur = self.cfg.curriculum
-        stage = [position_label(l) for l in self.exp.stages[self.exp.stage]]
-        enough = all(len(self.eye.per_position[k]) >= int(cur.min_trials) for k in stage)
-        mae = self.eye.mae_per_position()
-        if enough and all(mae[k] <= float(cur.advance_below_deg) for k in stage):
-            self.exp.set_stage(self.exp.stage + 1)
-
     def step_presentation(self, keep_view: bool) -> tuple[Presentation, PresentationRecord]:
+        """One presentation on its route, the eye's errors, the distance step after a sweep of
+        the final list, and the presentation's record."""
         # the random start pan only during train.start_jitter_presentations, then pan 0 as in the
         # paper; derived from the count, so a resumed run switches at the same presentation
         jittered = start_jitter_on(self.cfg, self.presentation)
         self.exp.set_start_jitter(jittered)
-        key = READOUT_PANS[distance_readout(self.cfg)]
-        sweeps = self.exp.sweeps(float(self.cfg.movement.explore))
-        route = None if sweeps else self.exp.planned_route(key)
-        pres = self.exp.run_presentation(learn=True, greedy=False, keep_view=keep_view, route=route)
-        visited = range(len(pres.labels)) if pres.route is None else pres.route
+        route = self.movement.route()
+        pres = self.exp.run_presentation(learn=True, keep_view=keep_view, route=route)
         for b in range(self.exp.robots):
-            for p in visited:
+            for p in range(len(pres.labels)) if pres.route is None else pres.route:
                 self.eye.record(pres.labels[p], pres.pans[b, p], pres.targets[b, p])
-        learnt_distance = self.exp.on_final_list
-        walked, moved = None, None
+        learnt_distance, walked = self.exp.on_final_list, None
         self.distance_fitted = False
         if learnt_distance and pres.route is None:
-            walked = self._learn_distance(pres)
-            if self.exp.planner is not None:  # a full sweep: the planner's queue learns it
-                self.exp.planner.observe(getattr(pres, key)[0], float(pres.distances[0]))
-        if self.exp.planner is not None:
-            moved = self._route_record(pres, key, learnt_distance)
+            pans = getattr(pres, READOUT_PANS[distance_readout(self.cfg)])
+            stats, walked = self.learn_distance(pans, pres.distances, self.dist)
+            self.last_distance_stats = stats or self.last_distance_stats
+            self.distance_fitted = bool(stats.get("trained"))
+        moved = self.movement.after(pres, learnt_distance)
         ran_perturbed = self.perturbed  # before the count moves on: how this presentation ran
         self.presentation += 1
         self.steps += pres.steps
         self._maybe_advance_stage()
+        summary_trials = int(self.cfg.metrics.summary_trials)
         record = PresentationRecord(
             presentation=self.presentation,
             steps=self.steps,
@@ -250,10 +194,9 @@ class Trainer:
             policy_stats=pres.policy_stats,
             mae=self.eye.mae(),
             mae_per_position=self.eye.mae_per_position(),
-            mae_recent=self.eye.recent_mae(int(self.cfg.metrics.summary_trials)),
+            mae_recent=self.eye.recent_mae(summary_trials),
             mae_recent_per_position={
-                k: v["mean"]
-                for k, v in self.eye.last_trials(int(self.cfg.metrics.summary_trials)).items()
+                k: v["mean"] for k, v in self.eye.last_trials(summary_trials).items()
             },
             distance_error=self.dist.by_range(),
             pans=pres.pans.tolist(),
@@ -267,6 +210,16 @@ class Trainer:
             distance_stats=dict(self.last_distance_stats),
         )
         return pres, record
+
+    def _maybe_advance_stage(self) -> None:
+        if self.exp.on_final_list:
+            return
+        cur = self.cfg.curriculum
+        stage = [position_label(l) for l in self.exp.stages[self.exp.stage]]
+        enough = all(len(self.eye.per_position[k]) >= int(cur.min_trials) for k in stage)
+        mae = self.eye.mae_per_position()
+        if enough and all(mae[k] <= float(cur.advance_below_deg) for k in stage):
+            self.exp.set_stage(self.exp.stage + 1)
 
     @property
     def grown(self) -> bool:
@@ -285,7 +238,7 @@ class Trainer:
             "mae_per_position": self.eye.mae_per_position(),
             "last_trials": self.eye.last_trials(int(self.cfg.metrics.summary_trials)),
             "distance_error": self.dist.by_range(),
-            **({"route_distance_error": self.route_dist.by_range()} if self.exp.planner else {}),
+            **self.movement.summary(),
         }
 
     def summary(self) -> dict:
@@ -304,114 +257,65 @@ class Trainer:
         }
 
     # --- the run ---------------------------------------------------------------------------
-    def _log_images(self, writer: SummaryWriter, pres: Presentation) -> None:
-        for scale in self.exp.coder.scales:
-            grid = np.asarray(self.exp.coder.atom_grid(scale))
-            writer.add_image(
-                f"coder/atoms_{scale}",
-                grid,
-                self.steps,
-                dataformats="HW" if grid.ndim == 2 else "HWC",
-            )
-        if pres.last_view is not None:
-            writer.add_image("world/I0_beside_It", pres.last_view, self.steps, dataformats="HWC")
-
     def skipped_updates(self) -> int:
-        """The policy's running count of updates it skipped as not finite (0 if it keeps none)."""
-        count = getattr(self.exp.policy, "rejected_updates", None)
-        return 0 if count is None else int(count)
+        """The policy's running count of updates it skipped as not finite."""
+        return int(self.exp.policy.rejected_updates)
 
     def fit(self) -> dict:
-        cfg = self.cfg
-        total = int(cfg.train.presentations)
-        resumed = bool(cfg.resume) and self.restore()
+        """The run, from its checkpoint if it has one, to train.presentations; its summary."""
+        total = int(self.cfg.train.presentations)
+        resumed = self._start()
+        with RunLog(self.run_dir, self.cfg, self.presentation, self.steps, resumed) as log:
+            while self.presentation < total:
+                self._switch_schedule()
+                keep_view = (self.presentation + 1) % int(self.cfg.train.image_every) == 0
+                started = time.perf_counter()
+                pres, record = self.step_presentation(keep_view)
+                seconds = time.perf_counter() - started
+                self.wall_time += seconds
+                line = log.write(record, pres.steps * self.exp.robots / seconds)
+                skipped, fitted = self.skipped_updates(), self.distance_fitted
+                self.health.report(line, skipped, fitted, log.writer, self.steps)
+                if keep_view:
+                    log.images(self.exp.coder, pres, self.steps)
+                if self.health.must_stop:
+                    message = self.health.stop_message(self.presentation, self.saved)
+                    log.writer.add_text("health", message, self.steps)
+                    raise Diverged(message)
+                # while the numbers are not finite, the last checkpoint stays the last good one
+                holding = not self.health.healthy and self.health.stop_after is not None
+                due = self.presentation % int(self.cfg.train.checkpoint_every) == 0
+                if not holding and (due or self.presentation == total):
+                    self.save()
+        summary = self.summary()
+        self.summary_path.write_text(json.dumps(summary, indent=2) + "\n")
+        return summary
+
+    def _start(self) -> bool:
+        """Resume from the checkpoint if asked and there is one (else start the metrics afresh),
+        record the config, and set the switches of where the run stands; whether it resumed."""
+        resumed = bool(self.cfg.resume) and self.restore()
         self.run_dir.mkdir(parents=True, exist_ok=True)
         if not resumed:  # a start from scratch: no lines of an earlier start without a checkpoint
             self.metrics_path.write_text("")
-        (self.run_dir / RUN_CONFIG_NAME).write_text(OmegaConf.to_yaml(cfg, resolve=True))
+        config = OmegaConf.to_yaml(self.cfg, resolve=True)
+        (self.run_dir / RUN_CONFIG_NAME).write_text(config)
         if self.perturbed:
             self.exp.set_perturbation(True)
         self.exp.set_growth(self.grown)
         self.health.skipped_seen = self.skipped_updates()
-        writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.steps if resumed else None)
-        if not resumed:
-            writer.add_text("config", "```yaml\n" + OmegaConf.to_yaml(cfg) + "\n```", 0)
-        interactive = sys.stderr.isatty()
-        bar = tqdm(
-            total=total,
-            initial=self.presentation,
-            desc="presentations",
-            unit="pres",
-            disable=not interactive,
-            dynamic_ncols=True,
-        )
-        log_every = max(1, total // 20)
-        try:
-            with self.metrics_path.open("a") as log:
-                while self.presentation < total:
-                    if (
-                        self.perturbation_start is not None
-                        and self.presentation == self.perturbation_start
-                    ):
-                        self.before_perturbation = self.metrics_summary()
-                        # The learnt state just before §5's perturbation, for
-                        # parallax-eval --checkpoint.
-                        checkpoint.save_atomic(
-                            self.state_dict(), self.run_dir / checkpoint.BEFORE_PERTURBATION_NAME
-                        )
-                        self.exp.set_perturbation(True)
-                    if self.presentation == self.growth_start:
-                        self.exp.set_growth(True)  # the body's stride grows; the robot's belief not
-                    keep_view = (self.presentation + 1) % int(cfg.train.image_every) == 0
-                    t0 = time.perf_counter()
-                    pres, record = self.step_presentation(keep_view)
-                    dt = time.perf_counter() - t0
-                    self.wall_time += dt
-                    sps = pres.steps * self.exp.robots / dt
-                    line = record.to_json()
-                    log.write(json.dumps(line) + "\n")
-                    log.flush()
-                    for tag, value in record.scalars(sps):
-                        writer.add_scalar(tag, value, self.steps)
-                    skipped = self.skipped_updates()
-                    self.health.report(line, skipped, self.distance_fitted, writer, self.steps)
-                    if keep_view:
-                        self._log_images(writer, pres)
-                    dist_total = record.distance_error.get("total")
-                    if interactive:
-                        bar.set_postfix(
-                            steps_s=f"{sps:.0f}",
-                            mae=f"{record.mae:.3f}",
-                            recent=f"{record.mae_recent:.3f}",
-                            dist=f"{dist_total:.2f}%" if dist_total is not None else "-",
-                        )
-                        bar.update(1)
-                    elif self.presentation % log_every == 0 or self.presentation == total:
-                        print(
-                            f"[parallax] presentation {self.presentation}/{total}  "
-                            f"steps/s {sps:.0f}  MAE {record.mae:.3f}° "
-                            f"(last {int(cfg.metrics.summary_trials)} trials "
-                            f"{record.mae_recent:.3f}°)  distance error "
-                            + (f"{dist_total:.2f}%" if dist_total is not None else "-"),
-                            flush=True,
-                        )
-                    if self.health.must_stop:
-                        message = self.health.stop_message(self.presentation, self.saved)
-                        writer.add_text("health", message, self.steps)
-                        raise Diverged(message)
-                    # while the numbers are not finite, the last checkpoint stays the last good one
-                    holding = not self.health.healthy and self.health.stop_after is not None
-                    if not holding and (
-                        self.presentation % int(cfg.train.checkpoint_every) == 0
-                        or self.presentation == total
-                    ):
-                        self.save()
-        finally:
-            bar.close()
-            writer.close()
-        summary = self.summary()
-        self.summary_path.write_text(json.dumps(summary, indent=2) + "\n")
-        return summary
+        return resumed
+
+    def _switch_schedule(self) -> None:
+        """§5's perturbation (the learnt state just before it kept for parallax-eval
+        --checkpoint) and the body's growth, at their presentations."""
+        if self.presentation == self.perturbation_start:
+            self.before_perturbation = self.metrics_summary()
+            path = self.run_dir / checkpoint.BEFORE_PERTURBATION_NAME
+            checkpoint.save_atomic(self.state_dict(), path)
+            self.exp.set_perturbation(True)
+        if self.presentation == self.growth_start:
+            self.exp.set_growth(True)  # the body's stride grows; the robot's belief does not
 
 
 def _presentation_of(line: str) -> float:

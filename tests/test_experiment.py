@@ -16,6 +16,11 @@ from parallax.config import compose
 from parallax.experiment import Experiment
 
 
+def _in_order(exp: Experiment) -> loop.InOrder:
+    """The plain sequence on this thread, for ``exp``'s robots and turns."""
+    return loop.InOrder(exp.envs, exp.coder, exp.turns)
+
+
 def _presentations(overrides: list[str], chunk: int, monkeypatch, count: int = 2):
     """``count`` presentations of a fresh experiment encoding ``chunk`` robots at a time, the
     robot slices of its encodings, and the state of its coder and policy afterwards."""
@@ -83,20 +88,21 @@ def test_robots_encoded_chunk_by_chunk_give_the_numbers_of_one_batch(
         # turns of 2 and 1 robots (the first encoded in one chunk), and of one robot each
         (3, ["env.robots_per_turn=2", "policy.eye_position_reference_m=0.5"]),
         (3, ["env.robots_per_turn=1", "policy.robot_updates=mean"]),
+        (2, ["policy.learn_reset_step=true"]),
     ],
 )
 def test_the_lockstep_gives_the_numbers_of_the_plain_loop(
     tiny_overrides, robots, extra, monkeypatch
 ) -> None:
     # the lockstep: GL thread, chunks of 2, the dictionary step on the helper thread during the
-    # policy's turn; the plain loop (parallax.loop.presentation): everything on this thread
+    # policy's turn; the plain sequence (parallax.loop.InOrder): everything on this thread
     monkeypatch.setattr(lockstep, "ENCODE_CHUNK", 2)
     cfg = compose(tiny_overrides + [f"env.robots={robots}", "env.initial_pan_jitter_deg=1", *extra])
     scheduled, plain = Experiment(cfg), Experiment(cfg)
     try:
         for learn in (True, True, False):
             presentation = scheduled.run_presentation(learn=learn)
-            reference = loop.presentation(plain, learn=learn)
+            reference = loop.presentation(plain.parts, _in_order(plain), learn=learn)
             _assert_same_presentation(presentation, reference)
             # the loop's thread accounts for its waits in the lockstep, not for the plain loop
             assert list(presentation.waits) == list(lockstep.WAITS)
@@ -125,7 +131,8 @@ def test_a_route_gives_the_numbers_of_the_plain_loop(tiny_overrides) -> None:
     try:
         for _ in range(2):
             presentation = scheduled.run_presentation(route=route)
-            _assert_same_presentation(presentation, loop.presentation(plain, route=route))
+            in_order = loop.presentation(plain.parts, _in_order(plain), route=route)
+            _assert_same_presentation(presentation, in_order)
             assert presentation.route == [len(presentation.lateral_positions) - 1, 0]
         _assert_same_states(scheduled.coder.state_dict(), plain.coder.state_dict())
         _assert_same_states(scheduled.policy.state_dict(), plain.policy.state_dict())
@@ -311,3 +318,19 @@ def test_frames_are_encoded_in_chunks_on_the_cpu_and_in_one_call_on_a_gpu(device
     assert len(coder.calls) == calls
     assert coder.calls[0][0] == 0 and coder.calls[-1][1] == robots
     assert frames.output.state.shape == (robots, 2)
+
+
+@pytest.mark.parametrize("learn_reset_step", [False, True])
+def test_the_step_across_a_trials_reset_is_learnt_only_when_asked(tiny_overrides, learn_reset_step):
+    """A presentation of r trials of t_h iterations gives r·(t_h − 1) transitions within trials;
+    learning the step into each trial after the first adds r − 1."""
+    cfg = compose(tiny_overrides + [f"policy.learn_reset_step={learn_reset_step}"])
+    exp = Experiment(cfg)
+    try:
+        exp.run_presentation()
+        trials, length = len(exp.lateral_positions), exp.trial_length
+        within = trials * (length - 1)
+        want = within + (trials - 1 if learn_reset_step else 0)
+        assert exp.policy.updates.item() + exp.policy.rejected_updates.item() == want
+    finally:
+        exp.close()

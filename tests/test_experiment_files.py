@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from omegaconf import OmegaConf
 
-from parallax.config import RESULT_NEUTRAL_KEYS, compose, flatten, validate
+from parallax.config import RESULT_NEUTRAL_KEYS, compose, flatten, upgrade_saved, validate
 
 EXPERIMENTS = Path(__file__).resolve().parents[1] / "conf" / "experiment"
 SETUPS = [
@@ -209,7 +209,7 @@ def test_only_the_recipes_single_positions_start_from_a_random_pan(setup):
 def test_the_committed_models_are_reproduced_by_one_experiment_name(run):
     """Each committed model's saved config is what `experiment=<name> seed=n` composes, for the
     folder <name>_seed<n>."""
-    saved_cfg = OmegaConf.load(CHECKPOINTS / run / "config.yaml")
+    saved_cfg = upgrade_saved(OmegaConf.load(CHECKPOINTS / run / "config.yaml"))
     saved = flatten(OmegaConf.to_container(saved_cfg, resolve=True))
     name, seed = run.rsplit("_seed", 1)
     current = _flat([f"experiment={name}", f"seed={seed}"])

@@ -20,8 +20,10 @@ from parallax import checkpoint
 from parallax.config import ConfigError, compose, load_run_config, validate
 from parallax.distance.metrics import distance_error_by_range
 from parallax.distance.planner import MovementPlanner
-from parallax.experiment import Experiment, seeds_for
+from parallax.experiment import Experiment
 from parallax.metrics import DistanceErrorTracker, position_label
+from parallax.movement import planned_route
+from parallax.parts import seeds_for
 from tests.conftest import TINY, train_tiny_run
 
 LATERAL = [0.05, 0.1, 0.15, 0.2]
@@ -434,7 +436,7 @@ def _routes_run(run_dir: Path, jittered: bool) -> tuple[list, dict]:
         routes, estimates = [], []
         for i, d in enumerate(EVAL_DISTANCES):
             exp.envs[0].task.set_next_stimulus(texture_index=i % textures, distance=d)
-            route = exp.planned_route("best_pans")
+            route = planned_route(exp.planner, "best_pans")
             pres = exp.run_presentation(learn=False, greedy=True, route=route)
             routes.append(pres.route)
             estimates.append(exp.planner.estimate(pres.route, pres.best_pans[0, pres.route]))

@@ -12,7 +12,6 @@ reference patches are non-persistent and must be set again after a resume.
 
 from __future__ import annotations
 
-import math
 import os
 import zlib
 from collections.abc import Callable, Mapping, Sequence
@@ -24,9 +23,11 @@ import numpy as np
 import torch
 from torch import nn
 
+from parallax.config.schema import CoderConfig, default
+
 from .atoms import atom_grid
 from .pursuit import SparseCode
-from .retina import ScaleSpec, as_gray_batch, check_normalisation
+from .retina import ScaleSpec, as_gray_batch
 from .scale import ScaleCoder
 
 
@@ -98,68 +99,33 @@ def scale_seed(seed: int, scale: str) -> int:
     return int(sequence.generate_state(1, dtype=np.uint64)[0] >> np.uint64(1))
 
 
-def _image_sides(image_size: Any) -> tuple[int, int]:
-    if isinstance(image_size, (int, np.integer)) and not isinstance(image_size, bool):
-        sides = (int(image_size), int(image_size))
-    elif (
-        isinstance(image_size, Sequence)
-        and len(image_size) == 2
-        and not isinstance(image_size, str)
-    ):
-        sides = (int(image_size[0]), int(image_size[1]))
-    else:
-        raise ValueError(f"image_size must be an int or (height, width), got {image_size!r}")
-    if min(sides) < 1:
-        raise ValueError(f"image_size must be positive, got {image_size!r}")
-    return sides
-
-
-def _positive_int(name: str, value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    return int(value)
-
-
 class MultiScaleCoder(nn.Module):
-    """Sparse coders of several scales on the same images; see the module docstring."""
+    """Sparse coders of several scales on the same images; see the module docstring. The settings
+    are coder.*'s, each defaulting to the schema's (the paper's coder) and checked by
+    parallax.config; ``seed`` and ``image_size`` come at run time."""
 
     def __init__(
         self,
-        scales: Sequence[str],
-        scale_specs: Mapping[str, Mapping[str, Any]],
+        scales: Sequence[str] = default(CoderConfig, "scales"),
+        scale_specs: Mapping[str, Mapping[str, Any]] = default(CoderConfig, "scale_specs"),
         *,
         seed: int,
         image_size: int | Sequence[int],
-        atoms: int = 288,
-        sparsity: int = 10,
-        learning_rate: float = 0.01,
-        normalisation: str = "per_half",
-        learn: bool = True,
+        atoms: int = CoderConfig.atoms,
+        sparsity: int = CoderConfig.sparsity,
+        learning_rate: float = CoderConfig.learning_rate,
+        normalisation: str = CoderConfig.normalisation,
+        learn: bool = CoderConfig.learn,
         pursuit: str = "gram",
-        robot_updates: str = "sum",
+        robot_updates: str = CoderConfig.robot_updates,
     ) -> None:
         super().__init__()
-        if isinstance(scales, str) or not isinstance(scales, Sequence) or len(scales) == 0:
-            raise ValueError(f"scales must be a non-empty list of scale names, got {scales!r}")
         scales = [str(name) for name in scales]
-        if len(set(scales)) != len(scales):
-            raise ValueError(f"scales must not repeat a scale, got {scales}")
-        unknown = [name for name in scales if name not in scale_specs]
-        if unknown:
-            raise ValueError(f"scales {unknown} have no entry in scale_specs {sorted(scale_specs)}")
-        atoms = _positive_int("atoms", atoms)
-        sparsity = _positive_int("sparsity", sparsity)
-        learning_rate = float(learning_rate)
-        if not math.isfinite(learning_rate) or learning_rate < 0:
-            raise ValueError(f"learning_rate must be a finite number ≥ 0, got {learning_rate!r}")
-        check_normalisation(normalisation)
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-        height, width = _image_sides(image_size)
-
+        # image_size is the world's, known at run time: (height, width) or one side
+        height, width = (image_size, image_size) if np.ndim(image_size) == 0 else image_size
         coders = {}
         for name in scales:
-            spec = ScaleSpec.from_mapping(name, scale_specs[name])
+            spec = ScaleSpec.from_mapping(scale_specs[name])
             if spec.window > min(height, width):
                 raise ValueError(
                     f"scale_specs.{name}.window={spec.window} does not fit in "
@@ -168,16 +134,16 @@ class MultiScaleCoder(nn.Module):
             generator = torch.Generator().manual_seed(scale_seed(int(seed), name))
             coders[name] = ScaleCoder(
                 spec,
-                atoms,
-                sparsity,
-                learning_rate,
+                int(atoms),
+                int(sparsity),
+                float(learning_rate),
                 normalisation,
                 generator,
                 pursuit,
                 robot_updates,
             )
         self.scales = scales
-        self.atoms = atoms
+        self.atoms = int(atoms)
         self.learn = bool(learn)
         self.normalisation = normalisation
         self.coders = nn.ModuleDict(coders)

@@ -28,10 +28,6 @@ def random_dictionary(
     n_atoms: int, dim: int, generator: torch.Generator, dtype: torch.dtype = torch.float32
 ) -> torch.Tensor:
     """(n_atoms, dim) Gaussian atoms normalised to unit length; reproducible from ``generator``."""
-    if n_atoms < 1 or dim < 1:
-        raise ValueError(
-            f"a dictionary needs at least one atom of one element, got {n_atoms}×{dim}"
-        )
     atoms = torch.randn(n_atoms, dim, generator=generator, dtype=torch.float64)
     return normalise_atoms_(atoms).to(dtype)
 

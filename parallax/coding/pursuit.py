@@ -51,7 +51,7 @@ def gram_matrix(dictionary: torch.Tensor) -> torch.Tensor:
     return dictionary @ dictionary.T
 
 
-def _check_inputs(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: int) -> None:
+def _check_inputs(patches: torch.Tensor, dictionary: torch.Tensor) -> None:
     if patches.dim() != 2 or dictionary.dim() != 2 or patches.shape[1] != dictionary.shape[1]:
         raise ValueError(
             f"patches (M,K) and dictionary (N,K) disagree: {tuple(patches.shape)} "
@@ -62,8 +62,6 @@ def _check_inputs(patches: torch.Tensor, dictionary: torch.Tensor, sparsity: int
             f"patches ({patches.dtype}, {patches.device}) and dictionary "
             f"({dictionary.dtype}, {dictionary.device}) must share dtype and device"
         )
-    if isinstance(sparsity, bool) or not isinstance(sparsity, int) or sparsity < 1:
-        raise ValueError(f"sparsity must be a positive integer, got {sparsity!r}")
 
 
 def _code(
@@ -97,7 +95,7 @@ def matching_pursuit(
     ``PARALLAX_PURSUIT_KERNEL`` (default ``auto``). All give the same result, bit for bit; other
     devices and dtypes than float32/float64 always use torch.
     """
-    _check_inputs(patches, dictionary, sparsity)
+    _check_inputs(patches, dictionary)
     if gram is None:
         gram = gram_matrix(dictionary)
     correlations = patches @ dictionary.T  # (M, N), updated in place
@@ -133,7 +131,7 @@ def matching_pursuit_recompute(
     patches: torch.Tensor, dictionary: torch.Tensor, sparsity: int
 ) -> SparseCode:
     """The straightforward batched MP: correlations recomputed from the residual at every step."""
-    _check_inputs(patches, dictionary, sparsity)
+    _check_inputs(patches, dictionary)
     residuals = patches.clone()
     rows = patches.shape[0]
     atom_indices = torch.empty(rows, sparsity, dtype=torch.long, device=patches.device)

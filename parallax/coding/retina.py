@@ -42,6 +42,7 @@ GRAY_WEIGHTS = (0.299, 0.587, 0.114)
 #: 8-bit image (1/255 ≈ 4e-3 relative).
 NEAR_CONSTANT_TOLERANCE = 1e-5
 
+#: The choices of coder.normalisation (checked by parallax.config).
 NORMALISATIONS = ("per_half", "joint")
 
 _BINOMIAL_5 = (1.0, 4.0, 6.0, 4.0, 1.0)
@@ -57,36 +58,9 @@ class ScaleSpec:
     stride: int
 
     @classmethod
-    def from_mapping(cls, name: str, spec: Mapping[str, Any]) -> ScaleSpec:
-        """Build from a config mapping, naming ``scale_specs.<name>.<key>`` in every error."""
-        expected = {"window", "subsample", "patch", "stride"}
-        keys = set(spec.keys())
-        if keys != expected:
-            raise ValueError(
-                f"scale_specs.{name} must have exactly the keys {sorted(expected)}, "
-                f"got {sorted(keys)}"
-            )
-        values = {}
-        for key in sorted(expected):
-            value = spec[key]
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(
-                    f"scale_specs.{name}.{key} must be a positive integer, got {value!r}"
-                )
-            values[key] = int(value)
-        levels = math.log2(values["subsample"])
-        if levels != int(levels):
-            raise ValueError(
-                f"scale_specs.{name}.subsample must be a power of 2 (Gaussian pyramid), "
-                f"got {values['subsample']}"
-            )
-        result = cls(**values)
-        if result.subsampled_size < result.patch:
-            raise ValueError(
-                f"scale_specs.{name}: window {result.window} sub-sampled ×{result.subsample} "
-                f"gives {result.subsampled_size} px, smaller than patch {result.patch}"
-            )
-        return result
+    def from_mapping(cls, spec: Mapping[str, Any]) -> ScaleSpec:
+        """From a config mapping (coder.scale_specs.<name>, checked by parallax.config)."""
+        return cls(**{key: int(spec[key]) for key in ("window", "subsample", "patch", "stride")})
 
     @property
     def pyramid_levels(self) -> int:
@@ -227,7 +201,6 @@ def zero_mean_unit_norm(vectors: torch.Tensor) -> torch.Tensor:
 
 def prepare_reference(raw_reference: torch.Tensor, normalisation: str) -> torch.Tensor:
     """What to cache of I0: normalised halves for ``per_half``; the raw patches for ``joint``."""
-    check_normalisation(normalisation)
     return zero_mean_unit_norm(raw_reference) if normalisation == "per_half" else raw_reference
 
 
@@ -235,12 +208,6 @@ def stack_pair(
     reference: torch.Tensor, raw_current: torch.Tensor, normalisation: str
 ) -> torch.Tensor:
     """γ = [I0 half ; I(t) half], (B,P,K); ``reference`` comes from :func:`prepare_reference`."""
-    check_normalisation(normalisation)
     if normalisation == "per_half":
         return torch.cat([reference, zero_mean_unit_norm(raw_current)], dim=-1)
     return zero_mean_unit_norm(torch.cat([reference, raw_current], dim=-1))
-
-
-def check_normalisation(normalisation: str) -> None:
-    if normalisation not in NORMALISATIONS:
-        raise ValueError(f"normalisation must be one of {NORMALISATIONS}, got {normalisation!r}")

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from parallax.config.schema import CoderConfig
+
 from . import native
 from .dictionary import (
     exact_pooled_activity_kernel,
@@ -39,10 +41,6 @@ from .retina import (
 #: (same results); "recompute": correlations recomputed from the residual at every step.
 PURSUITS = ("gram", "gram_cpp", "gram_torch", "recompute")
 _KERNELS = {"gram": None, "gram_cpp": "cpp", "gram_torch": "torch"}
-#: How the dictionary step of B robots in lockstep combines their patches: "mean", one step on
-#: the mean over all their patches (B robots teach as much as one); "sum" (beyond the paper),
-#: the sum of each robot's own step, so that every robot's experience counts in full.
-ROBOT_UPDATES = ("mean", "sum")
 
 
 @dataclass
@@ -68,13 +66,11 @@ class ScaleCoder(nn.Module):
         normalisation: str,
         generator: torch.Generator,
         pursuit: str = "gram",
-        robot_updates: str = "sum",
+        robot_updates: str = CoderConfig.robot_updates,
     ) -> None:
         super().__init__()
-        if pursuit not in PURSUITS:
+        if pursuit not in PURSUITS:  # not a setting of a run: the tests' and benchmarks' choice
             raise ValueError(f"pursuit must be one of {PURSUITS}, got {pursuit!r}")
-        if robot_updates not in ROBOT_UPDATES:
-            raise ValueError(f"robot_updates must be one of {ROBOT_UPDATES}, got {robot_updates!r}")
         self.robot_updates = robot_updates
         self.spec = spec
         self.sparsity = sparsity
@@ -147,11 +143,11 @@ class ScaleCoder(nn.Module):
     @torch.no_grad()
     def learn_from(self, code: SparseCode | Sequence[SparseCode]) -> None:
         """One gradient step with all the coded patches (one code, or the codes of consecutive
-        chunks of robots, in order), then unit-norm atoms again: the mean of the robots' steps,
-        or their sum (``robot_updates``)."""
+        chunks of robots, in order), then unit-norm atoms again: with ``robot_updates`` "each"
+        the sum of every robot's own step, with "mean" the mean of the robots' steps."""
         chunks = [code] if isinstance(code, SparseCode) else list(code)
         images = 1
-        if self.robot_updates == "sum":
+        if self.robot_updates == "each":
             patches = sum(chunk.residuals.shape[0] for chunk in chunks)
             images = max(patches // self.spec.patch_count, 1)
         step = (self.dictionary, chunks, self.learning_rate, _KERNELS.get(self.pursuit))

@@ -3,7 +3,8 @@
 ``schema``    every setting as a typed dataclass field with its one default (registered in
               Hydra's ConfigStore on import; conf/ files extend it)
 ``validate``  ranges and cross-field rules, checked before anything is written
-``plumbing``  composing, run-directory names, reading a run's saved config back, comparing two
+``plumbing``  composing, run-directory names, reading a run's saved config back (in this
+              parallax's words: ``upgrade_saved``), comparing two
 ``errors``    ConfigError, the one-line ``key=value: reason`` error
 """
 
@@ -31,8 +32,10 @@ from parallax.config.plumbing import (
     run_settings,
     schema_keys,
     start_jitter_on,
+    upgrade_saved,
 )
 from parallax.config.schema import (
+    ROBOT_UPDATES,
     CoderConfig,
     Config,
     CurriculumConfig,
@@ -42,9 +45,10 @@ from parallax.config.schema import (
     PerturbationConfig,
     PolicyConfig,
     TrainConfig,
+    default,
     register,
 )
-from parallax.config.validate import RUN_TIME_KEYS, validate
+from parallax.config.validate import RUN_TIME_KEYS, validate, validate_stimuli
 
 register()
 
@@ -57,6 +61,7 @@ __all__ = [
     "READOUT_PANS",
     "RESULT_NEUTRAL_KEYS",
     "RESUMABLE_CHANGES",
+    "ROBOT_UPDATES",
     "RUN_CONFIG_NAME",
     "RUN_TIME_KEYS",
     "CoderConfig",
@@ -71,6 +76,7 @@ __all__ = [
     "TrainConfig",
     "changed_settings",
     "compose",
+    "default",
     "distance_readout",
     "growth_start",
     "flatten",
@@ -84,5 +90,7 @@ __all__ = [
     "run_settings",
     "schema_keys",
     "start_jitter_on",
+    "upgrade_saved",
     "validate",
+    "validate_stimuli",
 ]

@@ -7,6 +7,7 @@ The settings themselves are in :mod:`parallax.config.schema`; their checks in
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import re
 from collections.abc import Sequence
@@ -126,6 +127,32 @@ def closest_key(key: str) -> str | None:
 
 #: Settings whose value is a mapping or list of the user's choosing, compared as a whole.
 OPAQUE_KEYS = frozenset({"coder.scale_specs", "perturbation.rotation_axis"})
+#: Choices an older parallax wrote under other names: (group, setting) → {old name: name}.
+#: "sum" (the coder's) and "in_turn" (the policy's) are both "each" (schema.ROBOT_UPDATES).
+RENAMED_CHOICES = {
+    ("coder", "robot_updates"): {"sum": "each"},
+    ("policy", "robot_updates"): {"in_turn": "each"},
+}
+#: Settings an older parallax did not have, and the value that is what it did.
+ADDED_SETTINGS = {("policy", "learn_reset_step"): False}
+
+
+def upgrade_saved(config: Any) -> Any:
+    """A saved configuration (a run's config.yaml, a checkpoint's "config"; a DictConfig or a
+    plain dict) as a copy in this parallax's words: the choices an older parallax wrote under
+    another name (RENAMED_CHOICES) renamed and the settings it did not have (ADDED_SETTINGS) at
+    the value that is what it did, so that reading a run back, resuming it and comparing it with
+    a freshly composed config see the same settings. Apply it wherever one is read."""
+    upgraded = copy.deepcopy(config)
+    for (group, key), names in RENAMED_CHOICES.items():
+        node = upgraded.get(group) if isinstance(upgraded, (dict, DictConfig)) else None
+        if isinstance(node, (dict, DictConfig)) and node.get(key) in names:
+            node[key] = names[node[key]]
+    for (group, key), value in ADDED_SETTINGS.items():
+        node = upgraded.get(group) if isinstance(upgraded, (dict, DictConfig)) else None
+        if isinstance(node, (dict, DictConfig)) and key not in node:
+            node[key] = value
+    return upgraded
 
 
 def load_run_config(run_dir: str | Path) -> DictConfig:
@@ -142,7 +169,7 @@ def load_run_config(run_dir: str | Path) -> DictConfig:
     if not path.is_file():
         raise FileNotFoundError(f"{run_dir} is not a parallax run directory (no {RUN_CONFIG_NAME})")
     register_resolvers()
-    saved = OmegaConf.load(path)
+    saved = upgrade_saved(OmegaConf.load(path))
     have, want = schema_keys(saved), schema_keys()
     missing, unknown = sorted(want - have - RESULT_NEUTRAL_KEYS), sorted(have - want)
     if missing or unknown:

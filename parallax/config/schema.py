@@ -12,7 +12,10 @@ instantiation. Ranges and cross-field rules are checked by :mod:`parallax.config
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 from omegaconf import MISSING
@@ -23,6 +26,10 @@ from parallax.geometry import ACTION_SET_DEG
 LATERAL_5_20_M = [round(0.05 + 0.01 * i, 2) for i in range(16)]
 #: The name under which each group's schema node is stored (conf/<group>/ files extend it).
 SCHEMA_NODE = "schema"
+#: How B robots in lockstep teach the dictionaries (coder.robot_updates) and the policy
+#: (policy.robot_updates): each, every robot's update applied as a step of its own | mean, one
+#: step, the mean of the robots' updates. Either is the paper's single robot at env.robots=1.
+ROBOT_UPDATES = ("each", "mean")
 
 
 # --- the world (env/) ------------------------------------------------------------------------
@@ -153,10 +160,10 @@ class CoderConfig:
     normalisation: str = "per_half"
     #: false freezes the dictionaries.
     learn: bool = True
-    #: B robots in lockstep: sum (beyond the paper: the sum of every robot's own step, so every
-    #: robot's patches teach in full) | mean (one step on the mean over all their patches, so B
-    #: robots teach the dictionaries as much as one). Either is the paper's step at env.robots=1.
-    robot_updates: str = "sum"
+    #: B robots in lockstep (ROBOT_UPDATES): each (beyond the paper: the sum of every robot's own
+    #: step, so every robot's patches teach in full) | mean (one step on the mean over all their
+    #: patches, so B robots teach the dictionaries as much as one).
+    robot_updates: str = "each"
     #: Filled by the trainer: the dictionaries' initialisation seed.
     seed: int = MISSING
     #: Filled by the trainer: env.image_size.
@@ -211,16 +218,19 @@ class PolicyConfig:
     #: Algorithm 3's projection Γ of the actor parameters Θ onto the ball of this radius after
     #: each update (Bhatnagar et al. 2009); null: no projection, the weight decay λ bounds Θ.
     actor_projection_radius: float | None = None
-    #: B robots in lockstep: in_turn (beyond the paper: their B updates one after the other, B
-    #: steps of algorithm 3) | mean (the mean of their updates from the same parameters: the
-    #: robots of a turn, env.robots_per_turn, teach as much as one). Either is algorithm 3
-    #: itself at env.robots=1.
-    robot_updates: str = "in_turn"
+    #: B robots in lockstep (ROBOT_UPDATES): each (beyond the paper: their B updates one after
+    #: the other, B steps of algorithm 3) | mean (the mean of their updates from the same
+    #: parameters: the robots of a turn, env.robots_per_turn, teach as much as one).
+    robot_updates: str = "each"
     #: Θ's entries start uniform in ±this (0: at zero). The paper gives no initialisation; the
     #: active-efficient-coding code starts the actor in ±0.4 (its weight_range).
     initial_actor_range: float = 0.0
     #: v's entries start uniform in ±this (0: at zero); the active-efficient-coding code: ±0.05.
     initial_critic_range: float = 0.0
+    #: Whether the step into a trial, across the pan's reset to the trial's start, is learnt like
+    #: any other within a presentation. The paper does not say; the active-efficient-coding code
+    #: does not learn the first step of a trial.
+    learn_reset_step: bool = False
     #: Filled by the trainer: seeds the action-sampling generator.
     seed: int = MISSING
 
@@ -467,3 +477,22 @@ def register() -> None:
     store.store(name=SCHEMA_NODE, node=Config)
     for group, node in GROUPS.items():
         store.store(group=group, name=SCHEMA_NODE, node=node)
+
+
+def default(node: type, name: str) -> Any:
+    """The schema's default of ``node``'s setting ``name``, for a component's keyword default:
+    lists as tuples and nodes as read-only mappings, so that one default object can be shared by
+    every call. Plain values can be read off the class as well (``CoderConfig.atoms``)."""
+    spec = next(spec for spec in dataclasses.fields(node) if spec.name == name)
+    value = spec.default_factory() if spec.default is dataclasses.MISSING else spec.default
+    return _read_only(value)
+
+
+def _read_only(value: Any) -> Any:
+    if dataclasses.is_dataclass(value):
+        value = {spec.name: getattr(value, spec.name) for spec in dataclasses.fields(value)}
+    if isinstance(value, Mapping):
+        return MappingProxyType({key: _read_only(item) for key, item in value.items()})
+    if isinstance(value, list):
+        return tuple(_read_only(item) for item in value)
+    return value

@@ -6,8 +6,9 @@ know, lists are non-empty and ordered, and settings that depend on each other ag
 fits in the image, every action is a pan increment the world accepts, …). Each failure is a
 :class:`ConfigError` naming the first key and value that cannot work, so `parallax-train` can
 stop with one line before Hydra creates a run directory, and a sweep's job before the trainer
-writes into its directory. The components check their own arguments as well; these checks
-give the config's key for the same problems, before minutes of set-up.
+writes into its directory. The checks are here alone: a component built from a config
+trusts its settings, and raises only for what a config cannot say (the shapes of the tensors
+it is handed, the arguments of a call at run time, the content of a file).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from parallax.config.errors import ConfigError
 from parallax.config.plumbing import DISTANCE_READOUTS, closest_key, schema_keys
+from parallax.config.schema import ROBOT_UPDATES
 
 #: Settings the trainer fills at run time; ``???`` in a composed config.
 RUN_TIME_KEYS = frozenset(
@@ -228,8 +230,6 @@ def _coder(check: _Checks) -> None:
     from parallax.coding.retina import NORMALISATIONS
 
     check.choice("coder.normalisation", NORMALISATIONS)
-    from parallax.coding.scale import ROBOT_UPDATES
-
     check.choice("coder.robot_updates", ROBOT_UPDATES)
 
 
@@ -262,9 +262,7 @@ def _policy(check: _Checks) -> None:
     from parallax.policy.features import FEATURE_NORMS
 
     check.choice("policy.feature_norm", FEATURE_NORMS)
-    from parallax.policy.natural_actor_critic import ROBOT_UPDATES as POLICY_ROBOT_UPDATES
-
-    check.choice("policy.robot_updates", POLICY_ROBOT_UPDATES)
+    check.choice("policy.robot_updates", ROBOT_UPDATES)
     check.integer("policy.zscore_horizon", 0, " (states; 0: all)")
     check.number("policy.eye_position_reference_m", at_least=0, what=" (metres; 0: off)")
     check.optional_number("policy.actor_projection_radius", above=0, what=" or null")
@@ -350,6 +348,13 @@ def _movement(check: _Checks) -> None:
     check.number("movement.price_per_cm", at_least=0, what=" (percentage points per cm)")
     check.number("movement.explore", above=0, at_most=1)
     if route == "planned":
+        queue = check.get("distance.queue_size")
+        if queue < 2:
+            check.fail(
+                "distance.queue_size",
+                queue,
+                "movement.route=planned needs at least 2 (its leave-one-out errors)",
+            )
         if check.get("env.robots") != 1:
             check.fail("env.robots", check.get("env.robots"), "movement.route=planned needs 1")
         if check.get("distance.targets") != "supervisor":
@@ -413,10 +418,43 @@ def _perturbation(check: _Checks) -> None:
         )
 
 
-def _stimuli(check: _Checks) -> None:
-    from parallax.envs.stimuli import StimulusError, load_stimuli
+def validate_stimuli(cfg: DictConfig) -> None:
+    """Raise ConfigError for the first env.stimuli value that cannot work: the part of
+    :func:`validate` that parallax-eval asks of the held-out textures it is given."""
+    _stimuli(_Checks(cfg))
 
-    try:
+
+def _stimuli(check: _Checks) -> None:
+    from parallax.envs.stimuli import (
+        PROCEDURAL_KINDS,
+        RESOLUTIONS,
+        SOURCES,
+        SPLITS,
+        StimulusError,
+        load_stimuli,
+    )
+
+    source = check.choice("env.stimuli.source", SOURCES)
+    check.choice("env.stimuli.split", SPLITS)
+    check.choice("env.stimuli.kind", PROCEDURAL_KINDS)
+    low, high = RESOLUTIONS
+    resolution = check.integer("env.stimuli.resolution", low, " (texels)")
+    if resolution > high:
+        check.fail("env.stimuli.resolution", resolution, f"must be at most {high} texels")
+    check.integer("env.stimuli.seed", 0)
+    if check.get("env.stimuli.count") is not None:
+        check.integer("env.stimuli.count", 1, " or null (all)")
+    folder = check.get("env.stimuli.dir")
+    if folder is not None and source == "procedural":
+        check.fail(
+            "env.stimuli.dir",
+            folder,
+            "is set but env.stimuli.source is procedural; set env.stimuli.dir=null or "
+            "env.stimuli.source=dir",
+        )
+    if source == "dir" and not folder:
+        check.fail("env.stimuli.dir", folder, "env.stimuli.source=dir needs a folder of images")
+    try:  # a folder of images is decoded here, once per process
         load_stimuli(check.get("env.stimuli"))
     except StimulusError as error:
         check.fail(f"env.stimuli.{error.key}", error.value, error.reason)

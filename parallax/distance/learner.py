@@ -16,7 +16,6 @@ squared error in m² over the queue after the fit (LM itself minimises the sum o
 
 from __future__ import annotations
 
-import inspect
 import math
 from collections.abc import Mapping, Sequence
 
@@ -24,35 +23,14 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from parallax.config.schema import DistanceConfig, default
 from parallax.distance.levenberg_marquardt import LevenbergMarquardt
 from parallax.distance.network import DistanceMLP
 from parallax.distance.queue_memory import QueueMemory
 from parallax.distance.targets import TargetSource, make_target_source
 from parallax.distance.weighting import position_weights, sensitive_positions
 
-#: The sensitivity test of §3.5.1 (parallax.distance.weighting.sensitive_positions).
-DEFAULT_SENSITIVITY = {"patch": 10, "subsample": 8.0, "nearest_distance": 3.0, "tolerance": 2.5}
-#: The Levenberg–Marquardt options ``lm`` may set: LevenbergMarquardt's keyword arguments, whose
-#: defaults are the ones used when ``lm`` leaves them out.
-LM_OPTIONS = tuple(
-    name
-    for name, parameter in inspect.signature(LevenbergMarquardt).parameters.items()
-    if parameter.kind is inspect.Parameter.KEYWORD_ONLY
-)
 STATE_VERSION = 1
-
-
-def _merged(
-    name: str,
-    known: Sequence[str],
-    defaults: Mapping[str, float],
-    given: Mapping[str, float] | None,
-) -> dict[str, float]:
-    given = dict(given or {})
-    unknown = sorted(set(given) - set(known))
-    if unknown:
-        raise ValueError(f"unknown {name} keys {unknown}; expected some of {sorted(known)}")
-    return {**defaults, **given}
 
 
 def _regression_residuals(forward, inputs: Tensor, targets: Tensor) -> Tensor:  # type: ignore[no-untyped-def]
@@ -67,40 +45,29 @@ class DistanceLearner:
         lateral_positions: Sequence[float],
         *,
         seed: int,
-        queue_size: int = 300,
-        hidden: int = 30,
-        weighting: bool = True,
-        y: float = 1.0,
-        sensitivity: Mapping[str, float] | None = None,
-        epochs_per_call: int = 10,
-        initial_epochs: int = 100,
-        lm: Mapping[str, float] | None = None,
-        targets: str | TargetSource = "supervisor",
-        odometry: Mapping[str, float] | None = None,
-        fit_from: int | None = None,
-        input_scaling: str = "global",
-        validation_fraction: float = 0.0,
-        test_fraction: float = 0.0,
-        max_fail: int = 6,
-        reset_mu: bool = False,
+        queue_size: int = DistanceConfig.queue_size,
+        hidden: int = DistanceConfig.hidden,
+        weighting: bool = DistanceConfig.weighting,
+        y: float = DistanceConfig.y,
+        sensitivity: Mapping[str, float] = default(DistanceConfig, "sensitivity"),
+        epochs_per_call: int = DistanceConfig.epochs_per_call,
+        initial_epochs: int = DistanceConfig.initial_epochs,
+        lm: Mapping[str, float] = default(DistanceConfig, "lm"),
+        targets: str | TargetSource = DistanceConfig.targets,
+        odometry: Mapping[str, float] = default(DistanceConfig, "odometry"),
+        fit_from: int | None = DistanceConfig.fit_from,
+        input_scaling: str = DistanceConfig.input_scaling,
+        validation_fraction: float = DistanceConfig.validation_fraction,
+        test_fraction: float = DistanceConfig.test_fraction,
+        max_fail: int = DistanceConfig.max_fail,
+        reset_mu: bool = DistanceConfig.reset_mu,
     ) -> None:
+        """The settings are distance.*'s (parallax.config checks them); ``sensitivity``, ``lm``
+        and ``odometry`` may give only some of their node's settings, the others keep the
+        schema's defaults."""
         self.lateral_positions = [float(value) for value in lateral_positions]
-        if not self.lateral_positions or not all(math.isfinite(v) for v in self.lateral_positions):
-            raise ValueError(
-                "lateral_positions must be a non-empty list of finite metres, "
-                f"got {lateral_positions!r}"
-            )
-        for name, value in (
-            ("epochs_per_call", epochs_per_call),
-            ("initial_epochs", initial_epochs),
-        ):
-            if int(value) != value or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
         self.epochs_per_call, self.initial_epochs = int(epochs_per_call), int(initial_epochs)
-        self.sensitivity = _merged(
-            "sensitivity", DEFAULT_SENSITIVITY, DEFAULT_SENSITIVITY, sensitivity
-        )
-        self.sensitive = sensitive_positions(self.lateral_positions, **self.sensitivity)
+        self.sensitive = sensitive_positions(self.lateral_positions, **sensitivity)
         flags = self.sensitive if weighting else [False] * len(self.lateral_positions)
         self.weights = torch.tensor(
             position_weights(self.lateral_positions, flags, float(y)), dtype=torch.float64
@@ -112,25 +79,12 @@ class DistanceLearner:
             input_scaling,
             generator=torch.Generator().manual_seed(int(seed)),
         )
-        self.optimizer = LevenbergMarquardt(self.network, **_merged("lm", LM_OPTIONS, {}, lm))
+        self.optimizer = LevenbergMarquardt(self.network, **lm)
         self.queue = QueueMemory(queue_size, len(self.lateral_positions))
-        self.target_source = make_target_source(targets, dict(odometry or {}))
-        if fit_from is not None and (int(fit_from) != fit_from or not 1 <= fit_from <= queue_size):
-            raise ValueError(f"fit_from must be an integer in 1..queue_size, got {fit_from!r}")
+        self.target_source = make_target_source(targets, odometry)
         self.fit_from = int(queue_size if fit_from is None else fit_from)
         self.validation_fraction = float(validation_fraction)
         self.test_fraction = float(test_fraction)
-        if not (
-            0 <= self.validation_fraction < 1
-            and 0 <= self.test_fraction < 1
-            and self.validation_fraction + self.test_fraction < 1
-        ):
-            raise ValueError(
-                "validation_fraction and test_fraction must be ≥ 0 with a sum below 1, got "
-                f"{validation_fraction!r} and {test_fraction!r}"
-            )
-        if int(max_fail) != max_fail or max_fail < 1:
-            raise ValueError(f"max_fail must be a positive integer, got {max_fail!r}")
         self.max_fail, self.reset_mu = int(max_fail), bool(reset_mu)
         # dividerand's draws, one permutation of the queue per fit
         self.split_generator = torch.Generator().manual_seed(int(seed) + 1)

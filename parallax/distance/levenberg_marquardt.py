@@ -30,6 +30,8 @@ import torch
 from torch import Tensor, nn
 from torch.func import functional_call, jacrev, vmap
 
+from parallax.config.schema import LevenbergMarquardtConfig
+
 #: ``closure(forward, *batch)`` returns the residual tensor (any shape; it is flattened).
 ResidualClosure = Callable[..., Tensor]
 
@@ -60,13 +62,6 @@ class LMRunResult:
     stop: str  # as LMStepResult.stop, or "max_fail"; "" means the epoch budget ran out
 
 
-def _positive(name: str, value: float) -> float:
-    value = float(value)
-    if not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return value
-
-
 class LevenbergMarquardt:
     """``trainlm``-style Levenberg–Marquardt over the trainable parameters of ``model``."""
 
@@ -74,31 +69,24 @@ class LevenbergMarquardt:
         self,
         model: nn.Module,
         *,
-        mu: float = 1e-3,
-        mu_decrease: float = 0.1,
-        mu_increase: float = 10.0,
-        mu_max: float = 1e10,
-        min_grad: float = 1e-7,
-        max_params: int = 5000,
-        max_jacobian_elements: int = 20_000_000,
-        weight_decay: float = 0.1,
+        mu: float = LevenbergMarquardtConfig.mu,
+        mu_decrease: float = LevenbergMarquardtConfig.mu_decrease,
+        mu_increase: float = LevenbergMarquardtConfig.mu_increase,
+        mu_max: float = LevenbergMarquardtConfig.mu_max,
+        min_grad: float = LevenbergMarquardtConfig.min_grad,
+        max_params: int = LevenbergMarquardtConfig.max_params,
+        max_jacobian_elements: int = LevenbergMarquardtConfig.max_jacobian_elements,
+        weight_decay: float = LevenbergMarquardtConfig.weight_decay,
     ) -> None:
+        """The options are distance.lm's (parallax.config checks their ranges)."""
         self.model = model
         self.weight_decay = float(weight_decay)
-        if not math.isfinite(self.weight_decay) or self.weight_decay < 0:
-            raise ValueError(f"weight_decay must be a finite number ≥ 0, got {weight_decay!r}")
-        self.initial_mu = _positive("mu", mu)
-        self.mu_decrease = _positive("mu_decrease", mu_decrease)
-        self.mu_increase = _positive("mu_increase", mu_increase)
-        if self.mu_decrease >= 1 or self.mu_increase <= 1:
-            raise ValueError(
-                f"need mu_decrease < 1 < mu_increase, got {mu_decrease!r} and {mu_increase!r}"
-            )
-        self.mu_max = _positive("mu_max", mu_max)
+        self.initial_mu = float(mu)
+        self.mu_decrease = float(mu_decrease)
+        self.mu_increase = float(mu_increase)
+        self.mu_max = float(mu_max)
         self.min_grad = float(min_grad)
-        if not math.isfinite(self.min_grad) or self.min_grad < 0:
-            raise ValueError(f"min_grad must be a finite number ≥ 0, got {min_grad!r}")
-        self.max_jacobian_elements = int(_positive("max_jacobian_elements", max_jacobian_elements))
+        self.max_jacobian_elements = int(max_jacobian_elements)
         self.mu = self.initial_mu
 
         self._names = [name for name, p in model.named_parameters() if p.requires_grad]
@@ -107,7 +95,7 @@ class LevenbergMarquardt:
         self.num_params = sum(p.numel() for p in self._params)
         if self.num_params == 0:
             raise ValueError(f"{type(model).__name__} has no trainable parameters to optimise")
-        if self.num_params > int(_positive("max_params", max_params)):
+        if self.num_params > int(max_params):
             raise ValueError(
                 f"{type(model).__name__} has {self.num_params} trainable parameters, more than "
                 f"max_params={max_params}: a dense Levenberg–Marquardt step needs a "

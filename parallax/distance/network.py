@@ -17,6 +17,9 @@ import math
 import torch
 from torch import Tensor, nn
 
+from parallax.config.schema import DistanceConfig
+
+#: The choices of distance.input_scaling (checked by parallax.config).
 INPUT_SCALINGS = ("global", "per_input")
 
 
@@ -43,20 +46,12 @@ class DistanceMLP(nn.Module):
     def __init__(
         self,
         inputs: int,
-        hidden: int = 30,
-        input_scaling: str = "global",
+        hidden: int = DistanceConfig.hidden,
+        input_scaling: str = DistanceConfig.input_scaling,
         generator: torch.Generator | None = None,
         dtype: torch.dtype = torch.float64,
     ) -> None:
         super().__init__()
-        if int(inputs) != inputs or inputs < 1:
-            raise ValueError(f"inputs must be a positive integer, got {inputs!r}")
-        if int(hidden) != hidden or hidden < 1:
-            raise ValueError(f"hidden must be a positive integer, got {hidden!r}")
-        if input_scaling not in INPUT_SCALINGS:
-            raise ValueError(
-                f"input_scaling must be one of {INPUT_SCALINGS}, got {input_scaling!r}"
-            )
         self.input_scaling = input_scaling
         self.hidden_layer = nn.Linear(int(inputs), int(hidden), dtype=dtype)
         self.output_layer = nn.Linear(int(hidden), 1, dtype=dtype)

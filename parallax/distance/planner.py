@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from parallax.config.schema import DistanceConfig, MovementConfig
+
 #: Edges (m) of the distance bins the expected error is conditioned on; the grid is 3–10 m.
 BIN_EDGES_M = (4.0, 5.0, 6.5, 8.0)
 
@@ -52,25 +54,16 @@ class MovementPlanner:
         self,
         lateral_positions: Sequence[float],
         *,
-        queue_size: int = 100,
-        price_per_trial: float = 0.0,
-        price_per_cm: float = 0.0,
+        queue_size: int = DistanceConfig.queue_size,
+        price_per_trial: float = MovementConfig.price_per_trial,
+        price_per_cm: float = MovementConfig.price_per_cm,
         ridge: float = 1.0e-6,
     ) -> None:
+        """L, the queue's length (distance.queue_size) and the prices (movement.*) are the run's
+        settings, checked by parallax.config; ``ridge`` keeps the fits' Gram matrices invertible."""
         self.lateral_positions = [float(l) for l in lateral_positions]
-        if not self.lateral_positions or any(l <= 0 for l in self.lateral_positions):
-            raise ValueError(
-                f"lateral_positions must be positive metres, got {lateral_positions!r}"
-            )
-        if int(queue_size) != queue_size or queue_size < 2:
-            raise ValueError(f"queue_size must be an integer ≥ 2, got {queue_size!r}")
-        for name, value in (
-            ("price_per_trial", price_per_trial),
-            ("price_per_cm", price_per_cm),
-            ("ridge", ridge),
-        ):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a finite number ≥ 0, got {value!r}")
+        if not (math.isfinite(ridge) and ridge >= 0):
+            raise ValueError(f"ridge must be a finite number ≥ 0, got {ridge!r}")
         self.queue_size = int(queue_size)
         self.price_per_trial = float(price_per_trial)
         self.price_per_cm = float(price_per_cm)

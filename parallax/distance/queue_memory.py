@@ -17,10 +17,6 @@ class QueueMemory:
     """A first-in-first-out store of the last ``capacity`` (s, target) pairs, newest first."""
 
     def __init__(self, capacity: int, input_size: int, dtype: torch.dtype = torch.float64) -> None:
-        if int(capacity) != capacity or capacity < 1:
-            raise ValueError(f"queue capacity must be a positive integer, got {capacity!r}")
-        if int(input_size) != input_size or input_size < 1:
-            raise ValueError(f"input size must be a positive integer, got {input_size!r}")
         self.capacity = int(capacity)
         self._inputs = torch.zeros(self.capacity, int(input_size), dtype=dtype)
         self._targets = torch.zeros(self.capacity, dtype=dtype)

@@ -17,6 +17,8 @@ from collections.abc import Callable
 
 from torch import Tensor
 
+from parallax.config.schema import OdometryConfig
+
 TARGET_SOURCES: dict[str, type[TargetSource]] = {}
 
 
@@ -80,11 +82,11 @@ class OdometryTargets(TargetSource):
 
     walks = True
 
-    def __init__(self, walk_fraction: float = 1.0, nominal_stride_m: float = 0.05) -> None:
-        if not 0.0 < float(walk_fraction) <= 1.0:
-            raise ValueError(f"walk_fraction must be in (0, 1], got {walk_fraction!r}")
-        if not float(nominal_stride_m) > 0.0:
-            raise ValueError(f"nominal_stride_m must be positive, got {nominal_stride_m!r}")
+    def __init__(
+        self,
+        walk_fraction: float = OdometryConfig.walk_fraction,
+        nominal_stride_m: float = OdometryConfig.nominal_stride_m,
+    ) -> None:
         self.walk_fraction = float(walk_fraction)
         self.nominal_stride_m = float(nominal_stride_m)
 
@@ -102,11 +104,9 @@ class OdometryTargets(TargetSource):
 def make_target_source(
     spec: str | TargetSource, odometry: dict[str, float] | None = None
 ) -> TargetSource:
-    """A registered source by name (the odometry source with the ``odometry`` options), or
-    ``spec`` itself if it already is a source."""
+    """A registered source by name (distance.targets; the odometry source with the ``odometry``
+    options), or ``spec`` itself if it already is a source."""
     if isinstance(spec, TargetSource):
         return spec
-    if spec not in TARGET_SOURCES:
-        raise ValueError(f"unknown target source {spec!r}; registered: {sorted(TARGET_SOURCES)}")
     cls = TARGET_SOURCES[spec]
     return cls(**(odometry or {})) if cls.walks else cls()

@@ -13,15 +13,10 @@ default 2.5 px makes 15 cm sensitive (exact score 531·0.15/3 = 26.55, Table 1's
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
-from parallax.geometry import (
-    FOCAL_LENGTH_PX,
-    NEAREST_DISTANCE_M,
-    disparity_score,
-    effective_patch_size,
-)
+from parallax.config.schema import SensitivityConfig
+from parallax.geometry import FOCAL_LENGTH_PX, disparity_score, effective_patch_size
 
 CM_PER_M = 100.0
 
@@ -29,21 +24,14 @@ CM_PER_M = 100.0
 def sensitive_positions(
     lateral_positions_m: Sequence[float],
     *,
-    patch: int = 10,
-    subsample: float = 8.0,
-    nearest_distance: float = NEAREST_DISTANCE_M,
-    tolerance: float = 2.5,
+    patch: int = SensitivityConfig.patch,
+    subsample: float = SensitivityConfig.subsample,
+    nearest_distance: float = SensitivityConfig.nearest_distance,
+    tolerance: float = SensitivityConfig.tolerance,
     focal_px: float = FOCAL_LENGTH_PX,
 ) -> list[bool]:
-    """For each l_k (metres, in the order of L): is it sensitive (eq. 10 and the text after)?"""
-    if not math.isfinite(tolerance) or tolerance < 0:
-        raise ValueError(
-            f"sensitivity tolerance must be a finite number of pixels ≥ 0, got {tolerance!r}"
-        )
-    if patch <= 0 or subsample <= 0:
-        raise ValueError(
-            f"patch and subsample must be positive, got patch={patch!r}, subsample={subsample!r}"
-        )
+    """For each l_k (metres, in the order of L): is it sensitive (eq. 10 and the text after)?
+    The settings are distance.sensitivity's (parallax.config checks their ranges)."""
     threshold = effective_patch_size(patch, subsample) - tolerance
     sensitive: list[bool] = []
     for lateral in lateral_positions_m:
@@ -55,24 +43,18 @@ def sensitive_positions(
 def position_weights(
     lateral_positions_m: Sequence[float], sensitive: Sequence[bool], y: float
 ) -> list[float]:
-    """w_k of eq. (12): 1/((1 + l_r − l_k)·y) with l in cm for sensitive positions, else 1."""
+    """w_k of eq. (12): 1/((1 + l_r − l_k)·y) with l in cm for sensitive positions, else 1; L
+    increasing and y > 0 (curriculum.lateral_positions and distance.y, checked by
+    parallax.config)."""
     if len(sensitive) != len(lateral_positions_m):
         raise ValueError(
             f"got {len(sensitive)} sensitivity flags for {len(lateral_positions_m)} positions"
         )
-    if not math.isfinite(y) or y <= 0:
-        raise ValueError(f"weighting hyper-parameter y must be positive and finite, got {y!r}")
     last_cm = float(lateral_positions_m[-1]) * CM_PER_M
     weights = []
     for lateral, is_sensitive in zip(lateral_positions_m, sensitive):
         if not is_sensitive:
             weights.append(1.0)
             continue
-        denominator = (1.0 + last_cm - float(lateral) * CM_PER_M) * y
-        if not denominator > 0:
-            raise ValueError(
-                f"weight of lateral position {lateral!r} m is undefined: 1 + l_r − l_k "
-                f"= {denominator / y!r} cm must be positive (is L in increasing order?)"
-            )
-        weights.append(1.0 / denominator)
+        weights.append(1.0 / ((1.0 + last_cm - float(lateral) * CM_PER_M) * y))
     return weights

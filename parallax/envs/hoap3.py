@@ -31,6 +31,7 @@ import mujoco
 import numpy as np
 from dm_control import mujoco as dm_mujoco
 
+from parallax.config.schema import DistanceGridConfig, EnvConfig
 from parallax.envs import rendering
 from parallax.envs.stimuli import StimulusSet, background_image
 from parallax.geometry import FOCAL_LENGTH_PX
@@ -96,26 +97,20 @@ def _rotation_quat(axis: tuple[float, float, float], angle_deg: float) -> np.nda
 
 def camera_axis(rotation_axis: str | tuple[float, float, float]) -> tuple[float, float, float]:
     """A perturbation rotation axis by name (optical, horizontal, vertical) or as a camera-frame
-    vector."""
+    vector (perturbation.rotation_axis, checked by parallax.config), as a unit vector."""
     if isinstance(rotation_axis, str):
-        if rotation_axis not in ROTATION_AXES:
-            raise ValueError(
-                f"rotation_axis={rotation_axis!r}: choose one of {sorted(ROTATION_AXES)} "
-                "or give a 3-vector in the camera frame"
-            )
         return ROTATION_AXES[rotation_axis]
     vector = np.asarray(rotation_axis, dtype=np.float64).reshape(-1)
-    if vector.shape != (3,) or not np.all(np.isfinite(vector)) or np.linalg.norm(vector) == 0:
-        raise ValueError(f"rotation_axis={rotation_axis!r}: expected a non-zero finite 3-vector")
     return tuple(float(v) for v in vector / np.linalg.norm(vector))
 
 
 def check_distance(distance_m: float) -> float:
-    if isinstance(distance_m, bool) or not isinstance(
-        distance_m, (int, float, np.integer, np.floating)
+    """A panel distance asked for at run time, as a float: a finite number of metres > 0."""
+    if (
+        isinstance(distance_m, bool)
+        or not isinstance(distance_m, (int, float, np.integer, np.floating))
+        or not (math.isfinite(distance_m) and distance_m > 0)
     ):
-        raise ValueError(f"distance must be a positive finite number of metres, got {distance_m!r}")
-    if not math.isfinite(distance_m) or distance_m <= 0:
         raise ValueError(f"distance must be a positive finite number of metres, got {distance_m!r}")
     return float(distance_m)
 
@@ -136,17 +131,13 @@ class Physics(dm_mujoco.Physics):
     # --- construction ----------------------------------------------------------------------
     @classmethod
     def create(
-        cls, stimuli: StimulusSet, image_size: int = 256, max_distance_m: float = 10.0
+        cls,
+        stimuli: StimulusSet,
+        image_size: int = EnvConfig.image_size,
+        max_distance_m: float = DistanceGridConfig.stop,
     ) -> Physics:
-        """Compile the world for ``image_size`` eye images and attach the (shared) stimulus set."""
-        if (
-            isinstance(image_size, bool)
-            or not isinstance(image_size, (int, np.integer))
-            or not 16 <= image_size <= 2048
-        ):
-            raise ValueError(
-                f"image_size={image_size!r}: expected an integer number of pixels in [16, 2048]"
-            )
+        """Compile the world for ``image_size`` eye images (env.image_size, whose range
+        parallax.config checks) and attach the (shared) stimulus set."""
         physics = cls.from_xml_string(
             model_xml(int(image_size), stimuli.resolution, max_distance_m)
         )
@@ -333,14 +324,11 @@ class Physics(dm_mujoco.Physics):
         The blur (σ in pixels) applies to every image captured from now on, I0 included.
         """
         if blur_sigma is not None:
-            blur_sigma = _check_finite("blur_sigma", blur_sigma)
-            if blur_sigma < 0:
-                raise ValueError(f"blur_sigma must be ≥ 0 pixels, got {blur_sigma!r}")
-            self._blur_sigma = blur_sigma
+            self._blur_sigma = float(blur_sigma)
         if rotation_axis is not None:
             self._rotation_axis = camera_axis(rotation_axis)
         if camera_rotation_deg is not None:
-            self._rotation_deg = _check_finite("camera_rotation_deg", camera_rotation_deg)
+            self._rotation_deg = float(camera_rotation_deg)
         quat = np.zeros(4)
         mujoco.mju_mulQuat(
             quat, self._left_eye_quat, _rotation_quat(self._rotation_axis, self._rotation_deg)

@@ -13,6 +13,7 @@ arrays are read-only.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Mapping
@@ -22,6 +23,8 @@ from typing import Any
 
 import cv2
 import numpy as np
+
+from parallax.config.schema import StimuliConfig
 
 #: Photographs for training textures (names of ``skimage.data`` loaders; motorcycle = its left
 #: view).
@@ -42,11 +45,14 @@ HELDOUT_PHOTOS = ("gravel", "moon", "page", "text", "retina")
 #: The still background behind the panel; in neither split.
 BACKGROUND_PHOTO = "cell"
 
+#: The choices of env.stimuli.source, .split and .kind (checked by parallax.config).
 SOURCES = ("skimage", "dir", "procedural")
 SPLITS = ("train", "heldout")
 PROCEDURAL_KINDS = ("dead_leaves", "pink_noise")
+#: The texture sides the panel takes (texels).
+RESOLUTIONS = (8, 4096)
 DEFAULT_COUNT = {"train": 120, "heldout": 40}
-SETTING_KEYS = ("source", "split", "count", "dir", "resolution", "seed", "kind")
+SETTING_KEYS = tuple(spec.name for spec in dataclasses.fields(StimuliConfig))
 
 # Crop acceptance: side as a fraction of the photo's shorter side, least contrast, most
 # near-black pixels, most overlap (intersection over union) with an accepted crop.
@@ -101,64 +107,25 @@ def load_stimuli(settings: Mapping[str, Any] | None = None) -> StimulusSet:
 
 
 def normalise_settings(settings: Mapping[str, Any] | None) -> dict[str, Any]:
-    """Fill defaults and validate; raises StimulusError naming the offending value."""
+    """The settings with the schema's defaults filled in (env.stimuli, whose values
+    parallax.config checks); raises StimulusError for a key it does not know or a folder that
+    is not there."""
     given = dict(settings or {})
     unknown = sorted(set(given) - set(SETTING_KEYS))
     if unknown:
         raise StimulusError(
             unknown[0], given[unknown[0]], f"no such setting; known: {', '.join(SETTING_KEYS)}"
         )
-    options = {
-        "source": "skimage",
-        "split": "train",
-        "count": None,
-        "dir": None,
-        "resolution": 256,
-        "seed": 0,
-        "kind": "dead_leaves",
-        **given,
-    }
-    for key, choices in (("source", SOURCES), ("split", SPLITS), ("kind", PROCEDURAL_KINDS)):
-        if options[key] not in choices:
-            raise StimulusError(key, options[key], f"must be one of {', '.join(choices)}")
-    resolution = options["resolution"]
-    if (
-        isinstance(resolution, bool)
-        or not isinstance(resolution, (int, np.integer))
-        or not 8 <= resolution <= 4096
-    ):
-        raise StimulusError(
-            "resolution", resolution, "must be a whole number of texels in [8, 4096]"
-        )
-    seed = options["seed"]
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise StimulusError("seed", seed, "must be a whole number ≥ 0")
-    count = options["count"]
-    if count is not None and (
-        isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1
-    ):
-        raise StimulusError("count", count, "must be a whole number ≥ 1, or null (all)")
-    if options["dir"] is not None and options["source"] != "dir":
-        # `stimuli.dir=<folder>` alone switches to the user's images; with procedural it is a
-        # mistake.
-        if options["source"] == "procedural":
-            raise StimulusError(
-                "dir",
-                options["dir"],
-                "is set but stimuli.source is procedural; set stimuli.dir=null or "
-                "stimuli.source=dir",
-            )
+    options = {**dataclasses.asdict(StimuliConfig()), **given}
+    if options["dir"] is not None and options["source"] == "skimage":
+        # `stimuli.dir=<folder>` on top of the shipped source means the user's images
         options["source"] = "dir"
-    if options["source"] == "dir":
-        if not options["dir"]:
-            raise StimulusError(
-                "dir", options["dir"], "stimuli.source=dir needs a folder of images"
-            )
-        if not Path(options["dir"]).expanduser().is_dir():
-            raise StimulusError("dir", options["dir"], "is not a folder")
-    options["resolution"] = int(resolution)
+    folder = options["dir"]
+    if options["source"] == "dir" and not (folder and Path(folder).expanduser().is_dir()):
+        raise StimulusError("dir", folder, "is not a folder")
+    options["resolution"] = int(options["resolution"])
     options["seed"] = int(options["seed"])
-    options["count"] = None if count is None else int(count)
+    options["count"] = None if options["count"] is None else int(options["count"])
     return options
 
 
@@ -324,7 +291,7 @@ def _procedural(
     kind: str, split: str, count: int, resolution: int, seed: int
 ) -> tuple[list[np.ndarray], list[str]]:
     split_code = SPLITS.index(split)  # disjoint random streams for the two splits
-    make = _dead_leaves if kind == "dead_leaves" else _pink_noise
+    make = {"dead_leaves": _dead_leaves, "pink_noise": _pink_noise}[kind]
     textures = [
         make(np.random.default_rng([seed, split_code, i, 104729]), resolution) for i in range(count)
     ]

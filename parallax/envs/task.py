@@ -24,37 +24,21 @@ from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
 
-from parallax.config.schema import EnvConfig, PerturbationConfig
+from parallax.config.schema import EnvConfig, PerturbationConfig, default
 from parallax.envs.hoap3 import Physics, check_distance
 from parallax.envs.stimuli import load_stimuli
 from parallax.geometry import ACTION_SET_DEG
 
-#: The paper's distance grid (§4.1): 3.0, 3.1, …, 10.0 m.
-PAPER_DISTANCES = {"start": 3.0, "stop": 10.0, "step": 0.1}
-
 
 def distance_grid(distances: Sequence[float] | Mapping[str, float] | None) -> tuple[float, ...]:
-    """Distances (m) from a list, a {start, stop, step} grid (stop included) or None (the
-    paper's)."""
+    """Distances (m) from a list, a {start, stop, step} grid (stop included; env.distances,
+    checked by parallax.config) or None (the schema's grid, the paper's 3.0, 3.1, …, 10.0 m)."""
     if distances is None:
-        distances = PAPER_DISTANCES
+        distances = default(EnvConfig, "distances")
     if isinstance(distances, Mapping):
-        missing = {"start", "stop", "step"} - set(distances)
-        if missing or len(distances) != 3:
-            raise ValueError(
-                f"distances={dict(distances)!r}: a grid needs exactly start, stop and step"
-            )
         start, stop, step = (float(distances[k]) for k in ("start", "stop", "step"))
-        if not all(math.isfinite(v) for v in (start, stop, step)) or step <= 0 or stop < start:
-            raise ValueError(
-                f"distances={dict(distances)!r}: need finite start ≤ stop and step > 0"
-            )
         count = int(math.floor((stop - start) / step + 1e-9)) + 1
         values = [round(start + i * step, 9) for i in range(count)]
-    elif isinstance(distances, (str, bytes)) or not isinstance(distances, Sequence):
-        raise ValueError(
-            f"distances={distances!r}: expected a list of metres, a start/stop/step grid or None"
-        )
     else:
         values = list(distances)
     if not values:
@@ -84,18 +68,6 @@ def check_lateral_positions(lateral_positions: Sequence[float]) -> tuple[float, 
     return tuple(values)
 
 
-def _non_negative(name: str, value: Any, unit: str) -> float:
-    """``value`` as a float, or a one-line error naming ``name`` if it is not a finite number
-    ≥ 0."""
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float))
-        or not (math.isfinite(value) and value >= 0)
-    ):
-        raise ValueError(f"{name}={value!r}: expected a number ≥ 0 ({unit})")
-    return float(value)
-
-
 class LateralPursuitTask(base.Task):
     """Pursue the panel with the head pan while the body is put down at l1 … lr."""
 
@@ -105,34 +77,13 @@ class LateralPursuitTask(base.Task):
         trial_length: int,
         distances: tuple[float, ...],
         num_textures: int,
-        pan_reset: bool = True,
-        max_pan_increment_deg: float = max(ACTION_SET_DEG),
+        pan_reset: bool = EnvConfig.pan_reset,
+        max_pan_increment_deg: float = EnvConfig.max_pan_increment_deg,
         random: Any = None,
-        initial_pan_jitter_deg: float = 0.0,
+        initial_pan_jitter_deg: float = EnvConfig.initial_pan_jitter_deg,
     ):
         super().__init__(random=random)
-        if (
-            isinstance(trial_length, bool)
-            or not isinstance(trial_length, (int, np.integer))
-            or trial_length < 2
-        ):
-            raise ValueError(
-                f"trial_length={trial_length!r}: expected an integer ≥ 2 "
-                "(t_h iterations per position)"
-            )
-        if not isinstance(pan_reset, (bool, np.bool_)):
-            raise ValueError(f"pan_reset={pan_reset!r}: expected True (reset to 0) or False (keep)")
-        if (
-            isinstance(max_pan_increment_deg, bool)
-            or not isinstance(max_pan_increment_deg, (int, float))
-            or not (math.isfinite(max_pan_increment_deg) and max_pan_increment_deg > 0)
-        ):
-            raise ValueError(
-                f"max_pan_increment_deg={max_pan_increment_deg!r}: expected a positive number"
-            )
-        self._initial_pan_jitter = _non_negative(
-            "initial_pan_jitter_deg", initial_pan_jitter_deg, "degrees"
-        )
+        self._initial_pan_jitter = float(initial_pan_jitter_deg)
         self._pending_positions = check_lateral_positions(lateral_positions)
         self._episode_positions = self._pending_positions
         self._trial_length = int(trial_length)
@@ -372,27 +323,24 @@ class PursuitEnvironment(control.Environment):
         self.physics.close_renderer()
 
 
-#: The defaults of :func:`load`: the schema's world and its unperturbed camera, written once.
-_WORLD, _CAMERA = EnvConfig(), PerturbationConfig()
-
-
 def load(
     seed: int | None = None,
     lateral_positions: Sequence[float] = (0.05,),
-    trial_length: int = _WORLD.trial_length,
-    distances: Sequence[float] | Mapping[str, float] | None = None,
-    stimuli: Mapping[str, Any] | None = None,
-    image_size: int = _WORLD.image_size,
-    pan_reset: bool = _WORLD.pan_reset,
-    camera_rotation_deg: float = _CAMERA.camera_rotation_deg,
-    rotation_axis: str | Sequence[float] = _CAMERA.rotation_axis,
-    blur_sigma: float = _CAMERA.blur_sigma,
-    max_pan_increment_deg: float = _WORLD.max_pan_increment_deg,
-    initial_pan_jitter_deg: float = _WORLD.initial_pan_jitter_deg,
+    trial_length: int = EnvConfig.trial_length,
+    distances: Sequence[float] | Mapping[str, float] | None = default(EnvConfig, "distances"),
+    stimuli: Mapping[str, Any] | None = default(EnvConfig, "stimuli"),
+    image_size: int = EnvConfig.image_size,
+    pan_reset: bool = EnvConfig.pan_reset,
+    camera_rotation_deg: float = PerturbationConfig.camera_rotation_deg,
+    rotation_axis: str | Sequence[float] = PerturbationConfig.rotation_axis,
+    blur_sigma: float = PerturbationConfig.blur_sigma,
+    max_pan_increment_deg: float = EnvConfig.max_pan_increment_deg,
+    initial_pan_jitter_deg: float = EnvConfig.initial_pan_jitter_deg,
 ) -> PursuitEnvironment:
     """The HOAP-3 lateral-pursuit world as a dm_control environment (see the module docstring);
-    ``load(seed=0)`` is the default task, every default the schema's (EnvConfig; ``distances``
-    None: the paper's grid, ``stimuli`` None: the built-in set).
+    ``load(seed=0)`` is the default task, every default the schema's (EnvConfig,
+    PerturbationConfig) but the lateral list, one position of 5 cm. The settings' ranges are
+    checked by parallax.config; ``distances`` and ``stimuli`` None: the schema's too.
 
     ``stimuli``: {"source": "skimage" | "dir" | "procedural", "split": "train" | "heldout",
     "count": int | None, "dir": folder, "resolution": texels, "seed": int, "kind": "dead_leaves" |

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from parallax.config.schema import WalkConfig
 from parallax.envs.hoap3 import Physics
 
 #: The body part that touches the panel, and the panel.
@@ -43,25 +44,19 @@ class Walk:
 
 class Walker:
     """Walks one robot's body to the panel and back; its slip noise has its own random stream,
-    so walking never changes what the eye sees or learns. When a growth spurt comes is the
-    trainer's schedule (env.walk.growth_start_fraction); it sets ``grown``."""
+    so walking never changes what the eye sees or learns. The body is env.walk's (whose ranges
+    parallax.config checks); when a growth spurt comes is the trainer's schedule
+    (env.walk.growth_start_fraction), which sets ``grown``."""
 
     def __init__(
         self,
         *,
         seed: int,
-        stride_m: float,
-        stride_slip: float,
-        substeps: int,
-        growth_factor: float,
+        stride_m: float = WalkConfig.stride_m,
+        stride_slip: float = WalkConfig.stride_slip,
+        substeps: int = WalkConfig.substeps,
+        growth_factor: float = WalkConfig.growth_factor,
     ) -> None:
-        if not stride_m > 0 or not 0 <= stride_slip < 0.5 or int(substeps) < 1:
-            raise ValueError(
-                f"stride_m must be > 0, stride_slip in [0, 0.5) and substeps ≥ 1, got "
-                f"{stride_m!r}, {stride_slip!r}, {substeps!r}"
-            )
-        if not growth_factor > 0:
-            raise ValueError(f"growth_factor must be > 0, got {growth_factor!r}")
         self.stride_m = float(stride_m)
         self.stride_slip = float(stride_slip)
         self.substeps = int(substeps)

@@ -61,13 +61,11 @@ class FeatureNormalizer(nn.Module):
         self, state_dim: int, num_scales: int, mode: str = "none", horizon: int = 0
     ) -> None:
         super().__init__()
-        if mode not in FEATURE_NORMS:
-            raise ValueError(f"feature_norm must be one of {FEATURE_NORMS}, got {mode!r}")
-        if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 0:
-            raise ValueError(f"zscore_horizon must be a non-negative int, got {horizon!r}")
-        if state_dim % num_scales != 0:
+        # the coder's sizes, known only at run time; mode and horizon are settings, which
+        # parallax.config.validate checks
+        if not (state_dim >= 1 and num_scales >= 1 and state_dim % num_scales == 0):
             raise ValueError(
-                f"state_dim={state_dim} does not split evenly into num_scales={num_scales}"
+                f"state_dim={state_dim} does not split into num_scales={num_scales} ≥ 1 blocks"
             )
         self.state_dim = state_dim
         self.num_scales = num_scales
@@ -220,6 +218,10 @@ class PolicyInputs:
         if not bool(torch.isfinite(states).all()):
             raise ValueError(f"{name} holds non-finite values")
         return states.to(device=like.device, dtype=like.dtype)
+
+    def observe(self, states: torch.Tensor) -> None:
+        """Adds checked states' θ part to the normaliser's running statistics."""
+        self.normalizer.observe(states[:, : self.state_dim])
 
     def features(self, states: torch.Tensor) -> torch.Tensor:
         """φ for checked states, with the normaliser's current statistics."""

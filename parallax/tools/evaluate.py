@@ -37,9 +37,12 @@ from parallax.config import (
     load_run_config,
     perturbation_start,
     start_jitter_on,
+    validate_stimuli,
 )
+from parallax.distance_step import distance_step
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
+from parallax.movement import planned_route
 from parallax.tools import plots
 from parallax.tools.report.runs import read_metrics
 from parallax.writable import folder_problem
@@ -104,7 +107,7 @@ def distance_results(
     """Errors by range and per distance of ``learner`` on the eye-movement vectors ``pans``, and
     the mean absolute error in the learner's metres. ``truths``: what a perfect learner would
     answer (default: the distances; for odometry targets the slip-free walk,
-    ``Experiment.distance_truths``); the ranges stay those of the panels' distances. The
+    ``distance_step(parts).truths``); the ranges stay those of the panels' distances. The
     vectors are kept ("samples") so that parallax-replay can score other learners on exactly the
     same eye movements."""
     from parallax.distance.metrics import distance_error_by_range
@@ -233,6 +236,8 @@ def evaluate(
         if key[len(STIMULI_PREFIX) :] not in cfg.env.stimuli:
             raise ValueError(f"{item!r}: {key} is not a stimulus setting")
         OmegaConf.update(cfg, key, yaml.safe_load(value) if value else None)
+    if stimuli:
+        validate_stimuli(cfg)
     trained_robots = int(cfg.env.robots)
     robots = trained_robots if robots is None else int(robots)
     if robots != trained_robots and (
@@ -352,7 +357,7 @@ def evaluate(
             key = READOUT_PANS[readout]
             for env, stream in zip(exp.envs, start_streams, strict=True):
                 env.task.random.set_state(stream)
-            routed = run_jobs(exp, jobs, True, readout, route=exp.planned_route(key))
+            routed = run_jobs(exp, jobs, True, readout, route=planned_route(exp.planner, key))
             estimates = [
                 exp.planner.estimate(v, s[v]) for v, s in zip(routed["routes"], routed["pans"])
             ]
@@ -365,7 +370,7 @@ def evaluate(
                 exp.distance,
                 runs["greedy"]["pans"],
                 grid_distances,
-                exp.distance_truths(grid_distances),
+                distance_step(exp.parts).truths(grid_distances),
             )
             pd = result["distance"]["per_distance"]
             curves["grid (held-out textures)"] = ([float(k) for k in pd], list(pd.values()))
@@ -374,7 +379,7 @@ def evaluate(
                     exp.distance,
                     between_run["pans"],
                     between_run["distances"],
-                    exp.distance_truths(between_run["distances"]),
+                    distance_step(exp.parts).truths(between_run["distances"]),
                 )
                 pb = result["distance_between_grid"]["per_distance"]
                 curves["between grid points"] = ([float(k) for k in pb], list(pb.values()))

@@ -45,9 +45,10 @@ from parallax.config import (
     load_run_config,
     run_name,
 )
+from parallax.distance_step import learn_online
 from parallax.envs.walk import walk_robots
-from parallax.experiment import body_walkers, distance_learner, truths_at, worlds
-from parallax.metrics import DistanceErrorTracker, learn_online
+from parallax.metrics import DistanceErrorTracker
+from parallax.parts import body_walkers, distance_learner, truths_at, worlds
 from parallax.tools.report.runs import (
     METRICS_NAME,
     SUMMARY_NAME,

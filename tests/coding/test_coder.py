@@ -277,20 +277,23 @@ def test_the_one_call_encoding_is_the_separate_calls_bit_for_bit(normalisation: 
 @pytest.mark.parametrize(
     ("overrides", "message"),
     [
+        # the settings' ranges are parallax.config's (tests/config/test_bad_input.py); the
+        # coder checks what only its caller knows: the images' size and the pursuit to use
         ({"image_size": 200}, r"scale_specs\.coarse\.window=250"),
-        ({"scales": []}, "non-empty"),
-        ({"scales": ["coarse", "coarse"]}, "repeat"),
-        ({"scales": ["middle"]}, "middle"),
-        ({"atoms": 0}, "atoms"),
-        ({"learning_rate": -0.1}, "learning_rate"),
-        ({"normalisation": "global"}, "normalisation"),
-        ({"seed": -1}, "seed"),
+        ({"image_size": (256, 200)}, r"scale_specs\.coarse\.window=250"),
         ({"pursuit": "omp"}, "pursuit"),
     ],
 )
-def test_bad_configuration_is_refused_with_the_key_named(overrides: dict, message: str) -> None:
+def test_bad_arguments_are_refused_with_the_key_named(overrides: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         _coder(**overrides)
+
+
+def test_the_defaults_are_the_papers_coder() -> None:
+    coder = MultiScaleCoder(seed=0, image_size=256)
+    assert coder.scales == ["coarse", "fine"] and coder.state_dim == 2 * 288
+    assert coder.coders["coarse"].spec.patch_count == 529
+    assert coder.coders["fine"].spec.patch_count == 289
 
 
 def test_misuse_at_call_time_is_explained() -> None:

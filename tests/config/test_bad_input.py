@@ -44,6 +44,7 @@ COMMAND_LINES = [
     ("experiment=nope", "experiment=nope"),
     ("env.walk.stride_slip=0.6", "env.walk.stride_slip=0.6"),
     ("movement.explore=0", "movement.explore=0.0"),
+    ("distance.max_fail=0", "distance.max_fail=0"),
 ]
 
 
@@ -126,6 +127,30 @@ BAD_VALUES = [
     ("distance.lm.weight_decay=-1", "distance.lm.weight_decay=-1.0"),
     ("distance.lm.max_params=0", "distance.lm.max_params=0"),
     ("distance.queue_size=100000", "distance.queue_size=100000"),
+    ("distance.sensitivity.patch=0", "distance.sensitivity.patch=0"),
+    ("distance.sensitivity.subsample=0", "distance.sensitivity.subsample=0.0"),
+    ("distance.lm.mu_max=0", "distance.lm.mu_max=0.0"),
+    ("distance.lm.min_grad=-1", "distance.lm.min_grad=-1.0"),
+    ("distance.lm.max_jacobian_elements=0", "distance.lm.max_jacobian_elements=0"),
+    ("distance.validation_fraction=1", "distance.validation_fraction=1.0"),
+    ("distance.test_fraction=-0.1", "distance.test_fraction=-0.1"),
+    (
+        "distance.validation_fraction=0.5 distance.test_fraction=0.5",
+        "distance.test_fraction=0.5",
+    ),
+    ("distance.max_fail=0", "distance.max_fail=0"),
+    ("distance.fit_from=0", "distance.fit_from=0"),
+    ("distance.fit_from=301", "distance.fit_from=301"),
+    ("distance.odometry.walk_fraction=0", "distance.odometry.walk_fraction=0.0"),
+    ("distance.odometry.walk_fraction=1.5", "distance.odometry.walk_fraction=1.5"),
+    ("distance.odometry.nominal_stride_m=0", "distance.odometry.nominal_stride_m=0.0"),
+    ("env.walk.stride_m=0", "env.walk.stride_m=0.0"),
+    ("env.walk.substeps=0", "env.walk.substeps=0"),
+    ("env.walk.growth_factor=0", "env.walk.growth_factor=0.0"),
+    ("env.stimuli.resolution=5000", "env.stimuli.resolution=5000"),
+    ("movement.price_per_trial=-0.1", "movement.price_per_trial=-0.1"),
+    ("movement.price_per_cm=inf", "movement.price_per_cm=inf"),
+    ("movement.route=planned distance.queue_size=1", "distance.queue_size=1"),
     ("perturbation.start_fraction=1.5", "perturbation.start_fraction=1.5"),
     ("perturbation.blur_sigma=inf", "perturbation.blur_sigma=inf"),
     ("curriculum.advance_below_deg=0", "curriculum.advance_below_deg=0.0"),
@@ -151,8 +176,8 @@ BAD_VALUES = [
     # choices the components do not know
     ("policy.feature_norm=l2", "policy.feature_norm=l2"),
     ("coder.normalisation=both", "coder.normalisation=both"),
-    ("coder.robot_updates=in_turn", "coder.robot_updates=in_turn"),
-    ("policy.robot_updates=sum", "policy.robot_updates=sum"),
+    ("coder.robot_updates=sum", "coder.robot_updates=sum"),
+    ("policy.robot_updates=in_turn", "policy.robot_updates=in_turn"),
     ("distance.input_scaling=none", "distance.input_scaling=none"),
     ("distance.targets=oracle", "distance.targets=oracle"),
     ("train.distance_readout=peak", "train.distance_readout=peak"),
@@ -183,6 +208,15 @@ def test_bad_values_are_named_in_one_line(overrides, named):
     line = check_command_line(overrides.split())
     assert line is not None and line.startswith(named), line
     assert "\n" not in line and len(line) < 300, line
+
+
+def test_the_stimulus_checks_alone_name_the_value():
+    """parallax-eval checks the held-out textures it is given with these (validate_stimuli)."""
+    from parallax.config import ConfigError, compose, validate_stimuli
+
+    validate_stimuli(compose(["env.stimuli.source=procedural"]))
+    with pytest.raises(ConfigError, match=r"^env\.stimuli\.kind=plaid: must be one of"):
+        validate_stimuli(compose(["env.stimuli.kind=plaid"]))
 
 
 def test_a_good_command_line_passes_the_checks():

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from parallax.config import ConfigError, compose, validate
-from parallax.experiment import seeds_for
+from parallax.parts import seeds_for
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
 CHECKPOINTS = CONF.parent / "docs" / "results" / "checkpoints"

@@ -81,10 +81,8 @@ def test_table_1_positions_and_the_tolerance_that_decides_them():
 
 def test_every_position_after_a_sensitive_one_is_sensitive():
     assert sensitive_positions([0.05, 0.16, 0.06]) == [False, True, True]
-    with pytest.raises(ValueError, match="increasing"):
-        position_weights([0.20, 0.05], [True, True], 1.0)
-    with pytest.raises(ValueError, match="y"):
-        position_weights([0.05], [True], 0.0)
+    with pytest.raises(ValueError, match="2 sensitivity flags for 1 positions"):
+        position_weights([0.05], [True, True], 1.0)
 
 
 def test_learner_applies_the_weights_in_training_and_prediction():
@@ -223,10 +221,8 @@ def test_bad_inputs_raise_clear_errors():
         learner.observe(np.array([0.1, math.nan, 0.3, 0.4]), 5.0)
     with pytest.raises(ValueError, match="-1.0"):
         learner.observe(np.zeros(4), -1.0)
-    with pytest.raises(ValueError, match="unknown lm keys"):
+    with pytest.raises(TypeError, match="learning_rate"):  # a misspelt option of distance.lm
         small_learner(lm={"mu": 1e-3, "learning_rate": 0.1})
-    with pytest.raises(ValueError, match="unknown target source"):
-        small_learner(targets="self_supervised")
 
 
 # -- targets, resume, config -----------------------------------------------------------------------
@@ -340,10 +336,3 @@ def test_the_split_stream_resumes_bit_identically():
         straight.network.state_dict().items(), resumed.network.state_dict().values()
     ):
         assert torch.equal(a, b), name
-
-
-def test_bad_split_settings_are_refused():
-    with pytest.raises(ValueError, match="sum below 1"):
-        small_learner(validation_fraction=0.5, test_fraction=0.5)
-    with pytest.raises(ValueError, match="max_fail"):
-        small_learner(max_fail=0)

@@ -288,25 +288,3 @@ def test_walk_robots_counts_only_the_robots_that_walked(at_3m):
 def test_walk_robots_needs_one_walker_per_robot(at_3m):
     with pytest.raises(ValueError):
         walk_robots([at_3m, at_3m], [walker()], 1.0)
-
-
-# -- arguments -------------------------------------------------------------------------------------
-@pytest.mark.parametrize(
-    "bad",
-    [
-        {"stride_m": 0.0},
-        {"stride_m": -0.05},
-        {"stride_m": float("nan")},
-        {"stride_slip": -0.01},
-        {"stride_slip": 0.5},
-        {"stride_slip": float("nan")},
-        {"substeps": 0},
-        {"growth_factor": 0.0},
-        {"growth_factor": -1.1},
-        {"growth_factor": float("nan")},
-    ],
-    ids=lambda bad: ",".join(f"{k}={v}" for k, v in bad.items()),
-)
-def test_bad_walker_arguments_raise(bad):
-    with pytest.raises(ValueError, match=next(iter(bad))):
-        walker(**bad)

@@ -250,8 +250,6 @@ def test_trials_can_start_from_a_jittered_pan_without_touching_the_reference():
         )
     plain.close()
     zero.close()
-    with pytest.raises(ValueError, match="initial_pan_jitter_deg=-1"):
-        small_env(initial_pan_jitter_deg=-1)
 
 
 def test_the_start_jitter_can_be_switched_off_and_on():
@@ -393,14 +391,11 @@ def test_rotation_about_the_vertical_axis_moves_the_target_pan():
         ({"lateral_positions": [0.1, 0.05]}, "0.05"),
         ({"lateral_positions": [0.1, 0.1]}, "0.1"),
         ({"lateral_positions": [0.05, float("nan")]}, "nan"),
-        ({"trial_length": 1}, "trial_length=1"),
-        ({"image_size": 4}, "image_size=4"),
-        ({"rotation_axis": "sideways"}, "sideways"),
-        ({"stimuli": {"source": "web"}}, "web"),
-        ({"stimuli": {"count": 0}}, "count=0"),
     ],
 )
 def test_bad_options_are_refused_with_the_value_named(options, named):
+    # lists of distances and positions, which a route also gives at run time; the settings'
+    # ranges are parallax.config's (tests/config/test_bad_input.py)
     with pytest.raises(ValueError, match=None) as error:
         small_env(**options)
     assert named in str(error.value)

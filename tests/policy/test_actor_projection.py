@@ -12,7 +12,7 @@ from parallax.tools.analysis.synthetic_pursuit import (
 
 
 def _trained_actor_norm(
-    radius: float | None, steps: int = 200, robot_updates: str = "in_turn"
+    radius: float | None, steps: int = 200, robot_updates: str = "each"
 ) -> float:
     task = SyntheticPursuit(
         num_robots=4, config=PursuitTaskConfig(units_per_scale=24, episode_length=8), seed=3
@@ -45,12 +45,6 @@ def test_a_ball_larger_than_the_actor_changes_nothing():
     assert _trained_actor_norm(1e6, robot_updates="mean") == _trained_actor_norm(
         None, robot_updates="mean"
     )
-    # in turn, a projected run takes its rows one by one and a free one through the rows' Gram
-    # matrices: the same steps, rounded otherwise
+    # with robot_updates=each, a projected run takes its rows one by one and a free one through
+    # the rows' Gram matrices: the same steps, rounded otherwise
     assert _trained_actor_norm(1e6) == pytest.approx(_trained_actor_norm(None), rel=1e-5)
-
-
-@pytest.mark.parametrize("radius", [0.0, -1.0, float("nan")])
-def test_the_radius_must_be_positive(radius):
-    with pytest.raises(ValueError, match="actor_projection_radius"):
-        NaturalActorCritic(8, 1, seed=0, feature_norm="none", actor_projection_radius=radius)

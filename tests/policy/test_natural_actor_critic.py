@@ -20,6 +20,7 @@ from parallax.tools.analysis.synthetic_pursuit import (
     correcting_fraction,
     train_on_synthetic_pursuit,
 )
+from parallax.train import check_command_line
 
 # PUBLISHED (imported): the published pursuit step sizes with θ alone as the state, the settings
 # these tests check
@@ -304,21 +305,33 @@ def test_config_instantiates_with_the_interface_keys() -> None:
 @pytest.mark.parametrize(
     "overrides, message",
     [
-        (dict(feature_norm="l2"), "feature_norm"),
         (dict(state_dim=13), "num_scales"),
-        (dict(temperature=0.0), "temperature"),
-        (dict(discount=1.5), "discount"),
-        (dict(reward_rate=0.0), "reward_rate"),
-        (dict(actions=[0.1, 0.1]), "actions"),
-        (dict(critic_lr=-1.0), "critic_lr"),
-        (dict(zscore_horizon=-5), "zscore_horizon"),
-        (dict(eye_position_reference_m=-0.5), "eye_position_reference_m"),
-        (dict(eye_position_reference_m=float("nan")), "eye_position_reference_m"),
+        (dict(num_scales=0), "num_scales"),
+        (dict(actions=[0.1, 0.1, 0.2]), "actions"),
+        (dict(seed=-1), "seed"),
     ],
 )
-def test_bad_settings_are_refused(overrides: dict, message: str) -> None:
+def test_what_the_config_check_cannot_see_is_refused(overrides: dict, message: str) -> None:
+    # the coder's sizes and the seed are filled in at run time; the config check asks for two
+    # distinct actions, not for all of them distinct
     with pytest.raises(ValueError, match=message):
         _policy(**overrides)
+
+
+#: Bad policy settings the config check refuses (tests/config/test_bad_input.py has the others).
+BAD_SETTINGS = [
+    "policy.eye_position_reference_m=nan",
+    "policy.reward_change_gain=-1",
+    "policy.initial_actor_range=-1",
+    "policy.initial_critic_range=-1",
+    "policy.actor_projection_radius=nan",
+]
+
+
+@pytest.mark.parametrize("override", BAD_SETTINGS)
+def test_bad_settings_are_refused_by_the_config_check(override: str) -> None:
+    line = check_command_line([override])
+    assert line is not None and line.startswith(override.partition("=")[0] + "="), line
 
 
 def test_bad_inputs_are_refused() -> None:
@@ -373,14 +386,15 @@ def test_eye_position_feature_is_the_implied_nearness_and_bypasses_the_normalise
     assert policy.input_dim == SMALL_DIM + 1 and policy.actor.shape == (7, SMALL_DIM + 1)
     lateral, distance = 0.05, 4.0
     on_target = math.degrees(math.atan(lateral / distance))
-    nu = policy.eye_position_feature(torch.tensor([on_target, 0.0, -on_target, 30.0]), lateral)
+    pans = torch.tensor([on_target, 0.0, -on_target, 30.0])
+    nu = policy.inputs.eye_position_feature(pans, lateral, policy.actor)
     torch.testing.assert_close(
         nu.squeeze(1).double(),
         torch.tensor([0.5 / distance, 0.0, -0.5 / distance, 1.0], dtype=torch.float64),
         rtol=1e-6,
         atol=1e-7,
     )
-    assert policy.eye_position_feature(torch.tensor([3.0]), 0.0).item() == 0.0
+    assert policy.inputs.eye_position_feature(torch.tensor([3.0]), 0.0, policy.actor).item() == 0.0
     theta = _states(3, seed=60) - _states(3, seed=61)
     states = torch.cat([theta, nu[:3]], dim=1)
     policy.act(states)
@@ -421,15 +435,14 @@ def test_reward_change_feature_is_the_signed_relative_change_and_bypasses_the_no
     rewards = torch.tensor([-0.97, -0.97, -0.97, -1.03, -0.5, -0.8])
     previous = torch.tensor([-1.0, -1.0, -1.0, -1.0, -1.0, -0.8])
     increments = torch.tensor([0.1, -0.05, 0.0, 0.2, 0.05, -0.2])
-    g = policy.reward_change_feature(rewards, previous, increments).squeeze(1).double()
+    g = policy.inputs.reward_change_feature(rewards, previous, increments, policy.actor)
+    g = g.squeeze(1).double()
     # +3 % after a left step → +0.3; after a right step → −0.3; no step → 0; −3 % after a left
     # step → −0.3; +50 % → clipped to 1; no change → 0
     torch.testing.assert_close(
         g, torch.tensor([0.3, -0.3, 0.0, -0.3, 1.0, 0.0], dtype=torch.float64), rtol=1e-5, atol=1e-6
     )
     assert _policy(reward_change_gain=0.0).input_dim == SMALL_DIM
-    with pytest.raises(ValueError, match="reward_change_gain"):
-        _policy(reward_change_gain=-1.0)
     theta = _states(3, seed=62) - _states(3, seed=63)
     extra = torch.tensor([[0.1, 0.3], [0.2, -1.0], [0.0, 0.0]])
     states = torch.cat([theta, extra], dim=1)
@@ -470,12 +483,11 @@ def test_the_policy_builds_its_state_from_what_the_robots_observe() -> None:
     state = policy.state(theta, reference, pans, 0.05, (rewards, previous, increments))
     assert state.shape == (3, policy.input_dim)
     torch.testing.assert_close(state[:, :SMALL_DIM], theta - reference, rtol=0, atol=0)
-    torch.testing.assert_close(
-        state[:, SMALL_DIM], policy.eye_position_feature(torch.tensor(pans), 0.05)[:, 0]
-    )
-    torch.testing.assert_close(
-        state[:, -1], policy.reward_change_feature(rewards, previous, increments)[:, 0]
-    )
+    inputs, like = policy.inputs, policy.actor
+    nu = inputs.eye_position_feature(torch.tensor(pans), 0.05, like)
+    torch.testing.assert_close(state[:, SMALL_DIM], nu[:, 0])
+    g = inputs.reward_change_feature(rewards, previous, increments, like)
+    torch.testing.assert_close(state[:, -1], g[:, 0])
     # no previous step in the trial: the reward-change entry is 0
     assert torch.equal(policy.state(theta, reference, pans, 0.05)[:, -1], torch.zeros(3))
     with pytest.raises(ValueError, match="needs θ_ref"):
@@ -486,17 +498,17 @@ def test_the_policy_builds_its_state_from_what_the_robots_observe() -> None:
     assert _policy().state(theta, None, pans, 0.05) is theta
 
 
-def test_in_turn_applies_the_rows_updates_one_after_the_other() -> None:
-    # robot_updates=in_turn: the batch ends where single-row updates of the valid rows, one
+def test_each_applies_the_rows_updates_one_after_the_other() -> None:
+    # robot_updates=each: the batch ends where single-row updates of the valid rows, one
     # after the other, end; the mean of the same rows ends elsewhere.
-    in_turn, one_by_one = _policy(robot_updates="in_turn"), _policy()
+    each, one_by_one = _policy(robot_updates="each"), _policy()
     mean = _policy(robot_updates="mean")
-    for policy in (in_turn, one_by_one, mean):
+    for policy in (each, one_by_one, mean):
         _randomise(policy, seed=13)
     phi, next_phi = _states(4, seed=14), _states(4, seed=15)
     action, reward = torch.tensor([2, 5, 0, 6]), torch.tensor([-0.3, -0.8, -0.1, -0.6])
     valid = torch.tensor([True, True, False, True])
-    stats = in_turn.update(phi, action, reward, next_phi, valid)
+    stats = each.update(phi, action, reward, next_phi, valid)
     mean.update(phi, action, reward, next_phi, valid)
     deltas = []
     for row in torch.nonzero(valid).flatten().tolist():
@@ -506,55 +518,38 @@ def test_in_turn_applies_the_rows_updates_one_after_the_other() -> None:
         )
         deltas.append(step["td_error"])
     for name in ("critic", "advantage", "actor", "average_reward"):
-        torch.testing.assert_close(getattr(in_turn, name), getattr(one_by_one, name))
-        assert not torch.allclose(getattr(in_turn, name), getattr(mean, name))
+        torch.testing.assert_close(getattr(each, name), getattr(one_by_one, name))
+        assert not torch.allclose(getattr(each, name), getattr(mean, name))
     assert stats["td_error"] == pytest.approx(sum(deltas) / len(deltas), rel=1e-6)
-    assert int(in_turn.updates) == 3 and int(mean.updates) == 1
+    assert int(each.updates) == 3 and int(mean.updates) == 1
 
 
-def test_in_turn_is_the_mean_for_one_robot() -> None:
-    in_turn, mean = _policy(robot_updates="in_turn"), _policy(robot_updates="mean")
-    for policy in (in_turn, mean):
+def test_each_is_the_mean_for_one_robot() -> None:
+    each, mean = _policy(robot_updates="each"), _policy(robot_updates="mean")
+    for policy in (each, mean):
         _randomise(policy, seed=16)
     transition = (_states(1, seed=17), torch.tensor([4]), torch.tensor([-0.5]), _states(1, 18))
-    for policy in (in_turn, mean):
+    for policy in (each, mean):
         policy.update(*transition, torch.tensor([True]))
     for name, value in mean.state_dict().items():
         if isinstance(value, torch.Tensor):
-            assert torch.equal(in_turn.state_dict()[name], value), name
+            assert torch.equal(each.state_dict()[name], value), name
 
 
-@pytest.mark.parametrize("overrides", [{}, dict(critic_lr=1.0, advantage_lr=0.1, actor_lr=0.1)])
-def test_in_turn_through_gram_matrices_is_the_row_by_row_loop(overrides: dict) -> None:
-    # 16 rows: what each row sees of the earlier rows' steps is carried through ΦΦᵀ and ΦΦ′ᵀ
-    fast, loop = _policy(**overrides), _policy(**overrides)
-    for policy in (fast, loop):
-        _randomise(policy, seed=19)
-    phi, next_phi = _states(16, seed=20), _states(16, seed=21)
-    action = torch.randint(0, 7, (16,), generator=torch.Generator().manual_seed(22))
-    reward = -torch.rand(16, generator=torch.Generator().manual_seed(23))
-    rows = (fast.features(phi), action, reward, fast.features(next_phi))
-    deltas = fast._apply_in_turn(*rows)
-    torch.testing.assert_close(deltas, loop._apply_row_by_row(*rows), rtol=1e-4, atol=1e-5)
-    for name in ("critic", "advantage", "actor", "average_reward"):
-        torch.testing.assert_close(getattr(fast, name), getattr(loop, name), rtol=1e-4, atol=1e-5)
-    assert int(fast.updates) == int(loop.updates) == 16
-
-
-def test_in_turn_projects_each_rows_step_when_a_radius_is_set() -> None:
-    in_turn = _policy(actor_projection_radius=0.5, robot_updates="in_turn")
+def test_each_projects_every_rows_step_when_a_radius_is_set() -> None:
+    each = _policy(actor_projection_radius=0.5, robot_updates="each")
     one_by_one = _policy(actor_projection_radius=0.5)
-    for policy in (in_turn, one_by_one):
+    for policy in (each, one_by_one):
         _randomise(policy, seed=24)
     phi, next_phi = _states(3, seed=25), _states(3, seed=26)
     action, reward = torch.tensor([1, 4, 6]), torch.tensor([-0.2, -0.7, -0.4])
-    in_turn.update(phi, action, reward, next_phi, torch.ones(3, dtype=torch.bool))
+    each.update(phi, action, reward, next_phi, torch.ones(3, dtype=torch.bool))
     for row in range(3):
         one = slice(row, row + 1)
         one_by_one.update(phi[one], action[one], reward[one], next_phi[one], torch.tensor([True]))
-    assert float(in_turn.actor.norm()) <= 0.5 + 1e-6
+    assert float(each.actor.norm()) <= 0.5 + 1e-6
     for name in ("critic", "advantage", "actor", "average_reward"):
-        assert torch.equal(getattr(in_turn, name), getattr(one_by_one, name)), name
+        assert torch.equal(getattr(each, name), getattr(one_by_one, name)), name
 
 
 def test_initial_ranges_start_the_weights_as_the_active_efficient_coding_code() -> None:
@@ -571,8 +566,6 @@ def test_initial_ranges_start_the_weights_as_the_active_efficient_coding_code() 
     other = _policy(seed=6, initial_actor_range=0.4, initial_critic_range=0.05)
     assert not torch.equal(other.actor, started.actor)
     assert torch.equal(plain._generator.get_state(), started._generator.get_state())
-    with pytest.raises(ValueError, match="initial_actor_range"):
-        _policy(initial_actor_range=-1.0)
 
 
 def test_the_critics_scale_is_reported() -> None:

@@ -48,7 +48,7 @@ def test_held_out_textures_of_another_kind(tiny_run, tmp_path):
         ("env.stimuli.split=train", "env.stimuli.split=train"),
         ("env.stimuli.colour=red", "env.stimuli.colour"),
         ("policy.actor_lr=1", "policy.actor_lr=1"),
-        ("env.stimuli.kind=plaid", "stimuli.kind='plaid'"),
+        ("env.stimuli.kind=plaid", "env.stimuli.kind=plaid"),
     ],
 )
 def test_a_bad_stimulus_setting_is_one_line_and_exit_2(tiny_run, tmp_path, capsys, item, named):

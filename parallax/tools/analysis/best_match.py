@@ -27,7 +27,7 @@ from parallax.config import compose
 def scale_specs() -> dict[str, ScaleSpec]:
     """The coder's scales as configured (conf/coder/two_scale.yaml)."""
     specs = compose().coder.scale_specs
-    return {name: ScaleSpec.from_mapping(name, spec) for name, spec in specs.items()}
+    return {name: ScaleSpec.from_mapping(spec) for name, spec in specs.items()}
 
 
 def window(image: np.ndarray, spec: ScaleSpec) -> np.ndarray:

@@ -35,7 +35,7 @@ import torch
 
 from parallax.config import load_run_config
 from parallax.distance.metrics import distance_error_by_range
-from parallax.experiment import distance_learner
+from parallax.parts import distance_learner
 from parallax.tools.analysis.baselines import target_pans
 from parallax.tools.report.runs import EVAL_NAME, read_record, record_file
 

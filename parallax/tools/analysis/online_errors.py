@@ -24,8 +24,9 @@ import numpy as np
 import torch
 
 from parallax.config import READOUT_PANS, distance_readout, load_run_config
-from parallax.experiment import distance_learner
-from parallax.metrics import DistanceErrorTracker, learn_online
+from parallax.distance_step import learn_online
+from parallax.metrics import DistanceErrorTracker
+from parallax.parts import distance_learner
 from parallax.tools.replay import ReplayError, parse_sweep, read_stream
 from parallax.tools.report.runs import METRICS_NAME, record_file
 

@@ -136,7 +136,7 @@ def run(
                     refresh=False,
                 )
         bar.close()
-    device = cases[0].trainer.exp.device if cases else torch.device("cpu")
+    device = cases[0].trainer.exp.coder.device if cases else torch.device("cpu")
     report: dict = {
         "overrides": list(overrides),
         # what the cases ran on, so that a saved report says which machine it measured

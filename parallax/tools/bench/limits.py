@@ -102,7 +102,7 @@ def coder_work_per_frame(cfg) -> dict[str, float]:
     N, k = int(cfg.coder.atoms), int(cfg.coder.sparsity)
     for scale in cfg.coder.scales:
         spec = cfg.coder.scale_specs[scale]
-        geometry = ScaleSpec.from_mapping(scale, spec)
+        geometry = ScaleSpec.from_mapping(spec)
         P, K = geometry.patch_count, geometry.dim
         flops += 2 * P * K * N + 2 * N * N * K + 2 * k * P * N + 4 * P * k * K + 2 * P * k
         bytes_moved += 4 * (3 * P * K + 3 * N * K + N * N + 2 * (k + 1) * P * N)

@@ -26,7 +26,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 from yaml import YAMLError
 
-from parallax.config import perturbation_start, run_settings
+from parallax.config import perturbation_start, run_settings, upgrade_saved
 from parallax.metrics import position_label
 
 SUMMARY_NAME = "summary.json"
@@ -263,7 +263,7 @@ def load_run(path: Path) -> Run:
     started = (path / RUN_CONFIG_NAME).is_file()
     config_path = path / RUN_CONFIG_NAME if started else path / HYDRA_CONFIG
     try:
-        config = _load_yaml(config_path)
+        config = upgrade_saved(_load_yaml(config_path))
     except (YAMLError, OmegaConfBaseException) as exc:
         return Run(
             path,

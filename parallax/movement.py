@@ -1,0 +1,112 @@
+"""Where the robot goes in a presentation: the paper's sweep of L, or a planned route (§7).
+
+The trainer asks its movement, before each presentation, for the route the loop follows
+(:meth:`Sweep.route`: None, every position of L in order) and, after it, for what the route
+learnt and what it cost (:meth:`Sweep.after`). :class:`Planned` is the first future work of §7:
+a robot that has learnt enough stops sweeping and asks :class:`parallax.distance.planner.
+MovementPlanner` where to look next, sweeping L still with probability ``movement.explore`` so
+that the planner's queue keeps learning.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from omegaconf import DictConfig
+
+from parallax.config import READOUT_PANS, distance_readout
+from parallax.distance.planner import MovementPlanner
+from parallax.loop import Route
+from parallax.metrics import DistanceErrorTracker
+from parallax.parts import Parts
+from parallax.presentation import Presentation
+from parallax.record import Route as RouteRecord
+
+
+def planned_route(planner: MovementPlanner, readout_key: str) -> Route:
+    """The planner as the loop's route, reading s as ``readout_key`` (the Presentation field of
+    train.distance_readout)."""
+
+    def choose(visited: list[int], so_far: Presentation) -> int | None:
+        pans = getattr(so_far, readout_key)[0]
+        return planner.next_position(visited, pans[visited])
+
+    return choose
+
+
+class Sweep:
+    """The paper's movement: every presentation sweeps all of L."""
+
+    def route(self) -> Route | None:
+        return None
+
+    def after(self, pres: Presentation, learnt_distance: bool) -> RouteRecord | None:
+        return None
+
+    def summary(self) -> dict:
+        return {}
+
+    def state_dict(self) -> dict:
+        return {}
+
+    def load_state_dict(self, state: dict) -> None:
+        pass
+
+
+class Planned(Sweep):
+    """A planned route once the planner's queue is full, else (and with probability ``explore``)
+    a sweep, whose vectors the planner's queue learns; its routes' estimates are scored online
+    apart from the sweeps' network."""
+
+    def __init__(
+        self,
+        planner: MovementPlanner,
+        explore_random: np.random.RandomState,
+        explore: float,
+        readout_key: str,
+        window: int,
+    ) -> None:
+        self.planner, self.explore_random, self.explore = planner, explore_random, float(explore)
+        self.readout_key = readout_key
+        self.errors = DistanceErrorTracker(window=window)
+
+    def route(self) -> Route | None:
+        draw = self.explore_random.random_sample()  # drawn every time, ready or not
+        if not self.planner.is_ready or draw < self.explore:
+            return None
+        return planned_route(self.planner, self.readout_key)
+
+    def after(self, pres: Presentation, learnt_distance: bool) -> RouteRecord:
+        pans = getattr(pres, self.readout_key)[0]
+        if learnt_distance and pres.route is None:  # a full sweep: the planner's queue learns it
+            self.planner.observe(pans, float(pres.distances[0]))
+        lateral_cm = [100.0 * l for l in pres.lateral_positions]
+        visited = list(range(len(lateral_cm))) if pres.route is None else pres.route
+        estimate = None
+        if pres.route is not None and learnt_distance:
+            estimate = self.planner.estimate(pres.route, pans[pres.route])
+            self.errors.record(estimate, float(pres.distances[0]))
+        return RouteRecord(
+            route=pres.route,
+            trials=len(visited),
+            travel_cm=2.0 * max(lateral_cm[k] for k in visited),
+            route_distance_error=self.errors.by_range(),
+            estimate=estimate,
+        )
+
+    def summary(self) -> dict:
+        return {"route_distance_error": self.errors.by_range()}
+
+    def state_dict(self) -> dict:
+        return {"route_dist": self.errors.state_dict()}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.errors.load_state_dict(state["route_dist"])
+
+
+def movement(cfg: DictConfig, parts: Parts) -> Sweep:
+    """The run's movement: a sweep of L, or planned routes with movement.route=planned."""
+    if parts.planner is None:
+        return Sweep()
+    readout_key = READOUT_PANS[distance_readout(cfg)]
+    window = int(cfg.metrics.distance_window)
+    return Planned(parts.planner, parts.explore, float(cfg.movement.explore), readout_key, window)

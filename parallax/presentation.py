@@ -1,0 +1,134 @@
+"""What B robots did in one stimulus presentation (paper §3.2, Fig. 3), gathered as it runs.
+
+:class:`Tally` collects, iteration by iteration, what :func:`parallax.loop.presentation` reports:
+q_p (the pan at each trial's last iteration) and α* there, the coder's mean reward and errors, the
+policy's mean statistics; :class:`Presentation` is the result. :class:`Step` is a turn's last
+step, which the policy learns from at the next iteration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+import torch
+
+from parallax.coding import CoderOutput
+from parallax.metrics import position_label
+
+
+@dataclass
+class Presentation:
+    """What B robots did during one stimulus presentation."""
+
+    lateral_positions: list[float]  # the list L used (metres)
+    pans: np.ndarray  # (B, r) pan at the last iteration of each trial, q_p (deg)
+    targets: np.ndarray  # (B, r) target pan α* at that iteration (deg)
+    # (B, r) beyond the paper: the pan at the iteration of each trial whose image the coder
+    # encoded best (highest reward −(eC+eF)); a readout of s that a runaway's end does not spoil
+    best_pans: np.ndarray
+    distances: np.ndarray  # (B,) metres
+    textures: np.ndarray  # (B,) texture indices
+    steps: int  # iterations per robot
+    reward: float = float("nan")  # mean coder reward over the presentation
+    errors: dict[str, float] = field(default_factory=dict)  # mean reconstruction error per scale
+    policy_stats: dict[str, float] = field(default_factory=dict)
+    last_view: np.ndarray | None = None  # robot 0's I0 beside its last image (for TensorBoard)
+    start_pans: np.ndarray | None = None  # (B, r) pan at the first iteration of each trial (deg)
+    # beyond the paper (§7): the positions of L a robot chose to visit, in order (indices into
+    # L; the other positions' pans are NaN); None when it swept the whole list
+    route: list[int] | None = None
+    # seconds the loop's thread spent waiting in the lockstep (parallax.lockstep.WAITS): for
+    # frames, for the dictionary step, encoding; the rest of its time is the policy's turn
+    waits: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def labels(self) -> list[str]:
+        return [position_label(l) for l in self.lateral_positions]
+
+
+class Step(NamedTuple):
+    """A robot's last step within the trial, for the transition the policy learns from next."""
+
+    state: torch.Tensor  # (B, input_dim) what the policy acted on
+    action: torch.Tensor  # (B,) the action indices
+    rewards: np.ndarray  # (B,) the coder's rewards for the images acted on
+    increments: np.ndarray  # (B,) the pan increments sent (deg)
+
+
+class Tally:
+    """What one presentation reports (:class:`Presentation`), gathered iteration by iteration."""
+
+    def __init__(
+        self, robots: int, lateral: list[float], trial_length: int, routed: bool = False
+    ) -> None:
+        self.lateral, self.trial_length = lateral, trial_length
+        shape = (robots, len(lateral))
+        # on a chosen route the positions never visited keep NaN
+        blank = np.full(shape, np.nan) if routed else np.zeros(shape)
+        self.pans, self.targets, self.start_pans = blank.copy(), blank.copy(), blank.copy()
+        self.best_pans, self.best_rewards = blank.copy(), np.full(shape, -np.inf)
+        self.visited: list[int] | None = [] if routed else None
+        # sums over robots and iterations, and the robot-encodings they add up
+        self.reward_sum, self.error_sums, self.encodings = 0.0, {}, 0
+        self.stat_sums: dict[str, float] = {}
+        self.updates = 0
+
+    def encoded(
+        self,
+        obs: list[dict],
+        out: CoderOutput,
+        pans: np.ndarray,
+        rewards: np.ndarray,
+        p: int,
+        robots: slice = slice(None),
+    ) -> None:
+        """The coder's output ``out`` (rewards in float64) for the images of ``robots`` (all by
+        default) seen at ``pans``, at position ``p`` of L."""
+        iteration = int(obs[0]["iteration"])
+        self.reward_sum += float(out.reward.sum())
+        for scale, e in out.errors.items():
+            self.error_sums[scale] = self.error_sums.get(scale, 0.0) + float(e.sum())
+        self.encodings += len(rewards)
+        if iteration == 0:
+            self.start_pans[robots, p] = pans
+        best = self.best_rewards[robots, p]
+        better = rewards > best  # ties keep the earlier pan
+        best[better] = rewards[better]
+        self.best_rewards[robots, p] = best
+        best_pans = self.best_pans[robots, p]
+        best_pans[better] = pans[better]
+        self.best_pans[robots, p] = best_pans
+        if iteration == self.trial_length - 1:  # q_p, and α* there
+            self.pans[robots, p] = pans
+            self.targets[robots, p] = [float(o["target_pan"]) for o in obs]
+
+    def updated(self, stats: dict[str, float]) -> None:
+        for k, v in stats.items():
+            self.stat_sums[k] = self.stat_sums.get(k, 0.0) + float(v)
+        self.updates += 1
+
+    def presentation(self, obs: list[dict] | None, keep_view: bool) -> Presentation:
+        """The record, from the tally and the last observations (None: before the first; the
+        distances and textures are then unknown, NaN and −1)."""
+        view = None
+        if keep_view:
+            view = np.concatenate([obs[0]["reference"], obs[0]["image"]], axis=1)
+        updates, encodings = self.updates, max(self.encodings, 1)
+        robots = self.pans.shape[0]
+        return Presentation(
+            lateral_positions=self.lateral,
+            pans=self.pans,
+            targets=self.targets,
+            best_pans=self.best_pans,
+            distances=np.array([float(o["distance"]) for o in obs] if obs else [np.nan] * robots),
+            textures=np.array([int(o["texture_index"]) for o in obs] if obs else [-1] * robots),
+            steps=self.encodings // robots,
+            reward=self.reward_sum / encodings,
+            errors={k: v / encodings for k, v in self.error_sums.items()},
+            policy_stats={k: v / updates for k, v in self.stat_sums.items()} if updates else {},
+            last_view=view,
+            start_pans=self.start_pans,
+            route=None if self.visited is None else list(self.visited),
+        )
