@@ -41,6 +41,7 @@ def test_every_setup_has_every_family_and_nothing_else():
         [f"{family}_{s}" for family in FAMILIES for s in SETUPS]
         + ["paper_algorithm", "unsourced_algorithm", "quickstart"]
         + ["embodied_multi_5_20_weighted", "embodied_growth", "planned_multi_5_20_weighted"]
+        + ["sensitivity_single_5", "sensitivity_multi_5_10"]
         + [f"without_{improvement}" for improvement in WITHOUT]
     )
     assert names == expected
@@ -254,3 +255,34 @@ def test_each_family_trains_and_resumes_exactly(name, tmp_path, tiny_overrides):
     whole = train(tmp_path / "whole", 6)
     train(tmp_path / "parts", 4)
     assert train(tmp_path / "parts", 6) == whole
+
+
+#: conf/open_setting/: each file switches these settings of the paper family away from the value
+#: its lineage gives (docs/paper_algorithm.md, the sensitivity study).
+OPEN_SETTINGS = {
+    "xi_1": {"policy.discount"},
+    "projection": {"policy.weight_decay", "policy.actor_projection_radius"},
+    "normalised_features": {"policy.feature_norm"},
+    "reset_step_learnt": {"policy.learn_reset_step"},
+    "plain_lm": {
+        "distance.validation_fraction",
+        "distance.test_fraction",
+        "distance.epochs_per_call",
+        "distance.initial_epochs",
+        "distance.reset_mu",
+    },
+}
+
+
+def test_every_open_setting_file_is_listed():
+    folder = EXPERIMENTS.parent / "open_setting"
+    assert sorted(p.stem for p in folder.glob("*.yaml")) == sorted(OPEN_SETTINGS)
+
+
+@pytest.mark.parametrize("setting", sorted(OPEN_SETTINGS))
+@pytest.mark.parametrize("setup", ["single_5", "multi_5_10"])
+def test_an_open_setting_file_switches_its_settings_and_nothing_else(setting, setup):
+    lineage = _flat([f"experiment=paper_{setup}"])
+    switched = _flat([f"experiment=paper_{setup}", f"+open_setting={setting}"])
+    differ = {k for k in set(lineage) | set(switched) if lineage.get(k) != switched.get(k)}
+    assert differ == OPEN_SETTINGS[setting]

@@ -362,3 +362,29 @@ def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_pat
     replays = [l for l in lines if l.startswith("parallax-replay ")]
     assert len(replays) == 3 and all(f"{tmp_path}/recipe/" in l for l in replays)
     assert len([l for l in lines if l.startswith("parallax-report ")]) == 3
+
+
+def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
+    lines = _dry_run("sensitivity.sh", tmp_path, "train.presentations=7")
+    sweeps = [l for l in lines if l.startswith("parallax-train -m ")]
+    switches = [
+        next((w for w in l.split() if w.startswith(("+open_setting=", "step_sizes="))), None)
+        for l in sweeps
+    ]
+    assert switches == [
+        None,
+        "+open_setting=xi_1",
+        "+open_setting=projection",
+        "+open_setting=normalised_features",
+        "+open_setting=reset_step_learnt",
+        "step_sizes=origin",
+        "step_sizes=chong",
+        "step_sizes=lukas",
+    ]
+    for line in sweeps:
+        assert "experiment=sensitivity_single_5\\,sensitivity_multi_5_10" in line
+        assert "seed=0\\,1\\,2" in line and line.rstrip().endswith("train.presentations=7")
+    (replay,) = [l for l in lines if l.startswith("parallax-replay ")]
+    assert replay.rstrip().endswith("open_setting=plain_lm")
+    (table,) = [l for l in lines if "parallax.tools.analysis.sensitivity" in l]
+    assert "--override=train.presentations=7" in table

@@ -29,6 +29,7 @@ import json
 import statistics
 import sys
 from collections.abc import Iterable, Sequence
+from importlib import resources
 from pathlib import Path
 
 import torch
@@ -37,10 +38,12 @@ from omegaconf import DictConfig, OmegaConf
 from parallax import checkpoint
 from parallax.checkpoint import BEFORE_PERTURBATION_NAME, CHECKPOINT_NAME
 from parallax.config import (
+    CONFIG_MODULE,
     DISTANCE_READOUTS,
     READOUT_PANS,
     RUN_CONFIG_NAME,
     distance_readout,
+    flatten,
     growth_start,
     load_run_config,
     run_name,
@@ -70,7 +73,7 @@ class ReplayError(ValueError):
 
 def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
     """['distance.y=1,2', 'distance.weighting=false'] → every combination, each a list of dotlist
-    items."""
+    items; ``open_setting=NAME`` (conf/open_setting/NAME.yaml) gives that file's settings."""
     axes = []
     for item in overrides:
         key, sep, values = item.partition("=")
@@ -78,15 +81,34 @@ def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
             raise ReplayError(
                 f"{item!r} is neither an existing directory nor an override KEY=VALUE[,VALUE…]"
             )
-        # the readout only picks which of the two logged pans of each trial s is built from; the
-        # walk to the panel comes after the sweep, with its own random stream
-        if not (key.startswith(REPLAYABLE_PREFIXES) or key == "train.distance_readout"):
-            raise ReplayError(
-                f"override {item!r}: only distance.*, env.walk.* and train.distance_readout "
-                "can be replayed (anything else changes the eye movements: train a new run)"
-            )
-        axes.append([f"{key}={v}" for v in values.split(",")])
-    return [list(combo) for combo in itertools.product(*axes)] if axes else [[]]
+        if key.lstrip("+") == "open_setting":
+            axes.append([open_setting_items(name) for name in values.split(",")])
+            continue
+        _check_replayable(item, key)
+        axes.append([[f"{key}={v}"] for v in values.split(",")])
+    return [sum(combo, []) for combo in itertools.product(*axes)] if axes else [[]]
+
+
+def _check_replayable(item: str, key: str) -> None:
+    # the readout only picks which of the two logged pans of each trial s is built from; the
+    # walk to the panel comes after the sweep, with its own random stream
+    if not (key.startswith(REPLAYABLE_PREFIXES) or key == "train.distance_readout"):
+        raise ReplayError(
+            f"override {item!r}: only distance.*, env.walk.* and train.distance_readout "
+            "can be replayed (anything else changes the eye movements: train a new run)"
+        )
+
+
+def open_setting_items(name: str) -> list[str]:
+    """The settings conf/open_setting/NAME.yaml sets, as dotlist items (each replayable)."""
+    path = resources.files(CONFIG_MODULE) / "open_setting" / f"{name}.yaml"
+    if not path.is_file():
+        raise ReplayError(f"open_setting={name}: no conf/open_setting/{name}.yaml")
+    settings = flatten(OmegaConf.to_container(OmegaConf.create(path.read_text())))
+    items = [f"{key}={json.dumps(value)}" for key, value in settings.items()]
+    for item in items:
+        _check_replayable(f"open_setting={name} ({item})", item.partition("=")[0])
+    return items
 
 
 def read_stream(run_dir: Path) -> list[dict]:

@@ -307,3 +307,19 @@ def test_replayed_checkpoints_hold_the_replayed_learner(perturbed_run, tmp_path)
         perturbed_run, distances=[4.0, 6.0], between=[5.5], out=tmp_path / "trained"
     )["distance"]
     assert fresh["per_distance"] != trained["per_distance"]  # c = 4 is another learner
+
+
+def test_an_open_setting_of_the_distance_learner_replays_as_its_files_settings():
+    items = parse_sweep(["open_setting=plain_lm", "distance.y=1,2"])
+    plain_lm = [
+        "distance.validation_fraction=0.0",
+        "distance.test_fraction=0.0",
+        "distance.epochs_per_call=10",
+        "distance.initial_epochs=100",
+        "distance.reset_mu=false",
+    ]
+    assert items == [[*plain_lm, "distance.y=1"], [*plain_lm, "distance.y=2"]]
+    with pytest.raises(ReplayError, match="policy.discount"):  # it changes the eye movements
+        parse_sweep(["open_setting=xi_1"])
+    with pytest.raises(ReplayError, match="no conf/open_setting/nothing.yaml"):
+        parse_sweep(["+open_setting=nothing"])

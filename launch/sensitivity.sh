@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# The sensitivity study of the paper family (docs/paper_algorithm.md): what its numbers rest on.
+# experiment=sensitivity_single_5 and sensitivity_multi_5_10 (the paper's set-ups in shorter
+# runs) for every seed, with the lineage's settings and with one switch each: a file of
+# conf/open_setting/ that changes the eye (+open_setting=NAME) or another of the AEC code's
+# step-size sets (step_sizes=NAME); the switch that changes the distance learner only
+# (open_setting=plain_lm) by parallax-replay of the lineage's runs; then the table,
+# docs/results/sensitivity.md and .json. Resumable (fixed folders, like launch/reproduce.sh).
+# Arguments with '=' are Hydra overrides for every run; the table is told of them.
+#     bash launch/sensitivity.sh
+set -euo pipefail
+# shellcheck disable=SC1091
+source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
+sweep="$(px_record_dir sensitivity)"
+replays="$(px_record_dir sensitivity_replays)"
+setups="experiment=sensitivity_single_5,sensitivity_multi_5_10"
+seeds="seed=${SEEDS:-0,1,2}"
+status=0
+px_sweep "$sweep" "$setups" "$seeds" "$@" || status=$?
+for setting in xi_1 projection normalised_features reset_step_learnt; do
+  px_sweep "$sweep" "$setups" "+open_setting=$setting" "$seeds" "$@" || status=$?
+done
+for set in origin chong lukas; do
+  px_sweep "$sweep" "$setups" "step_sizes=$set" "$seeds" "$@" || status=$?
+done
+# the lineage's runs: those launched with neither switch
+lineage=()
+if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
+  lineage=("$sweep/<runs of the lineage's settings>")
+else
+  for overrides in "$sweep"/*/.hydra/overrides.yaml; do
+    [[ -f "$overrides" ]] || continue
+    if ! grep -qE -- '^- (\+open_setting|step_sizes)=' "$overrides"; then
+      lineage+=("$(dirname "$(dirname "$overrides")")")
+    fi
+  done
+fi
+if (( ${#lineage[@]} )); then
+  px_run parallax-replay "${lineage[@]}" --out "$replays" open_setting=plain_lm || status=$?
+fi
+table_overrides=()
+for arg in "$@"; do table_overrides+=("--override=$arg"); done
+px_run python -m parallax.tools.analysis.sensitivity "$sweep" "$replays" \
+  "${table_overrides[@]}" --json "$report_root/sensitivity.json" \
+  --markdown "$report_root/sensitivity.md" || status=$?
+exit "$status"

@@ -1,0 +1,179 @@
+"""`python -m parallax.tools.analysis.sensitivity FOLDER...`: what the paper family's numbers rest
+on — its eye and distance errors with each open setting switched away from its lineage's value.
+
+The runs are those of ``experiment=sensitivity_<setup>`` (paper_<setup> in a shorter run), each
+with at most one switch: an open setting of ``conf/open_setting/`` (``+open_setting=xi_1``), or
+another of the lineage's step-size sets (``step_sizes=chong``); ``parallax-replay`` of the
+lineage's runs gives the rows that change the distance learner only (``plain_lm``). A run
+belongs to the row whose composed config it equals, its seed and the settings that change no
+result aside, so that a run of other settings is never counted in a row.
+
+Each row and set-up shows, as mean ± standard deviation over the seeds: the eye's error of
+Tables 2–3 (the last-100-trial mean, averaged over L) before and after §5's perturbation, the
+online distance error of Tables 4–5 (total) before and after, and the critic's peak scale
+(max over the run of mean |v·φ|; it grows without bound when the actor-critic diverges).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from omegaconf import OmegaConf
+
+from parallax.config import RESULT_NEUTRAL_KEYS, RUN_TIME_KEYS, compose, run_settings
+from parallax.tools.report.runs import ReportError, Run, find_run_dirs, load_run, read_metrics
+from parallax.writable import file_problem
+
+SETUPS = ("single_5", "multi_5_10")
+#: The rows, in the table's order: the lineage's values, then one switch each.
+ROWS = {
+    "lineage": [],
+    "ξ = 1": ["+open_setting=xi_1"],
+    "projection": ["+open_setting=projection"],
+    "normalised features": ["+open_setting=normalised_features"],
+    "reset step learnt": ["+open_setting=reset_step_learnt"],
+    "step sizes origin": ["step_sizes=origin"],
+    "step sizes Chong": ["step_sizes=chong"],
+    "step sizes Lukas": ["step_sizes=lukas"],
+    "plain LM (replay)": ["+open_setting=plain_lm"],
+}
+#: Settings a run's row does not depend on: its seed, those filled at run time, and those that
+#: change no result.
+IGNORED = {"seed", *RUN_TIME_KEYS, *RESULT_NEUTRAL_KEYS}
+
+
+def _settings(config: dict) -> dict:
+    flat = run_settings(config)
+    return {k: v for k, v in flat.items() if k not in IGNORED}
+
+
+def row_settings(overrides: list[str]) -> dict[tuple[str, str], dict]:
+    """(row, set-up) → the settings a run of that row and set-up has (``overrides`` added to
+    every row, e.g. a shrunken test run's)."""
+    table = {}
+    for setup in SETUPS:
+        for row, switch in ROWS.items():
+            cfg = compose([f"experiment=sensitivity_{setup}", *switch, *overrides])
+            table[(row, setup)] = _settings(OmegaConf.to_container(cfg, resolve=True))
+    return table
+
+
+def _mean_sd(values: list[float]) -> dict | None:
+    values = [v for v in values if v is not None and math.isfinite(v)]
+    if not values:
+        return None
+    mean = sum(values) / len(values)
+    spread = sum((v - mean) ** 2 for v in values) / max(len(values) - 1, 1)
+    sd = math.sqrt(spread)
+    return {"mean": mean, "sd": sd, "n": len(values)}
+
+
+def run_figures(run: Run) -> dict:
+    """One run's cells: eye (°) and distance (%) before and after, and the critic's peak."""
+    figures: dict = {}
+    for phase in ("before", "after"):
+        trials = run.last_trials(phase) or {}
+        means = [cell["mean"] for cell in trials.values() if cell.get("mean") is not None]
+        figures[f"eye_{phase}"] = sum(means) / len(means) if means else None
+        figures[f"distance_{phase}"] = (run.online_distance(phase) or {}).get("total")
+    try:
+        scales = [r.get("policy_critic_scale") for r in read_metrics(run.path)]
+    except FileNotFoundError:  # a replay logs no policy
+        scales = []
+    scales = [s for s in scales if isinstance(s, (int, float))]
+    figures["critic_peak"] = max(scales) if scales else None
+    return figures
+
+
+def sensitivity(folders: list[Path], overrides: list[str]) -> dict:
+    """The table: {setup: {row: {cell: mean ± sd over seeds}}}, and the runs left out."""
+    wanted = row_settings(overrides)
+    found: dict[tuple[str, str], list[dict]] = {}
+    left_out = []
+    for folder in folders:
+        for path in find_run_dirs(folder):
+            run = load_run(path)
+            key = next((k for k, s in wanted.items() if s == _settings(run.config)), None)
+            if run.problem is not None or key is None:
+                left_out.append(f"{path}: {run.problem or 'settings of no row'}")
+                continue
+            found.setdefault(key, []).append(run_figures(run))
+    table: dict = {setup: {} for setup in SETUPS}
+    order = list(ROWS)
+    for (row, setup), runs in sorted(found.items(), key=lambda item: order.index(item[0][0])):
+        table[setup][row] = {cell: _mean_sd([r[cell] for r in runs]) for cell in runs[0]}
+    return {"table": table, "left_out": left_out}
+
+
+def _cell(value: dict | None, digits: int) -> str:
+    if value is None:
+        return "—"
+    return f"{value['mean']:.{digits}f} ± {value['sd']:.{digits}f}"
+
+
+def format_table(result: dict) -> str:
+    lines = []
+    for setup, rows in result["table"].items():
+        if not rows:
+            continue
+        lines += [
+            f"sensitivity_{setup}",
+            "| row | seeds | eye before (°) | eye after (°) | distance before (%) "
+            "| distance after (%) | critic peak |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for row, cells in rows.items():
+            seeds = max((c["n"] for c in cells.values() if c), default=0)
+            lines.append(
+                f"| {row} | {seeds} | {_cell(cells['eye_before'], 3)} | "
+                f"{_cell(cells['eye_after'], 3)} | {_cell(cells['distance_before'], 2)} | "
+                f"{_cell(cells['distance_after'], 2)} | {_cell(cells['critic_peak'], 3)} |"
+            )
+        lines.append("")
+    lines += [f"left out: {entry}" for entry in result["left_out"]]
+    return "\n".join(lines)
+
+
+def _fail(message: str) -> None:
+    print(f"sensitivity: error: {message}", file=sys.stderr)
+    sys.exit(2)
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.tools.analysis.sensitivity",
+        description=__doc__.split("\n\n")[0],
+    )
+    parser.add_argument("folders", nargs="+", type=Path, help="sweep folders or run folders")
+    parser.add_argument("--json", type=Path, help="also write the table here")
+    parser.add_argument("--markdown", type=Path, help="also write the printed tables here")
+    parser.add_argument(
+        "--override",
+        action="append",
+        default=[],
+        help="a setting every run of the study was given besides its row's (repeatable)",
+    )
+    args = parser.parse_args(argv)
+    for option, path in (("--json", args.json), ("--markdown", args.markdown)):
+        problem = file_problem(path) if path is not None else None
+        if problem:
+            _fail(f"{option} {path}: {problem}")
+    try:
+        result = sensitivity(args.folders, args.override)
+    except (ReportError, ValueError) as exc:  # no runs there, or a setting no config has
+        _fail(str(exc).splitlines()[0])
+    text = format_table(result)
+    print(text)
+    if args.markdown is not None:
+        args.markdown.write_text(text + "\n")
+    if args.json is not None:
+        args.json.write_text(json.dumps(result, indent=2) + "\n")
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,59 @@
+"""python -m parallax.tools.analysis.sensitivity: runs sorted into the rows of the sensitivity
+study by their settings, and their cells read from their summaries."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from parallax.config import compose
+from parallax.tools.analysis import sensitivity
+from parallax.trainer import Trainer
+from tests.conftest import TINY
+
+#: A shrunken study: the tiny settings, and a perturbation halfway through 4 presentations.
+SHRUNK = [*TINY, "train.presentations=4", "train.checkpoint_every=4"]
+
+
+def _train(run_dir, overrides):
+    trainer = Trainer(compose(overrides), run_dir)
+    try:
+        trainer.fit()
+    finally:
+        trainer.exp.close()
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    root = tmp_path_factory.mktemp("study")
+    _train(root / "lineage", ["experiment=sensitivity_single_5", *SHRUNK])
+    _train(root / "xi_1", ["experiment=sensitivity_single_5", "+open_setting=xi_1", *SHRUNK])
+    # settings of no row: another ξ
+    _train(root / "other", ["experiment=sensitivity_single_5", "policy.discount=0.5", *SHRUNK])
+    return root
+
+
+def test_runs_go_to_the_row_of_their_settings(study, tmp_path, capsys):
+    out = tmp_path / "table.json"
+    args = [str(study), "--json", str(out)] + [f"--override={o}" for o in SHRUNK]
+    result = sensitivity.main(args)
+    rows = result["table"]["single_5"]
+    assert list(rows) == ["lineage", "ξ = 1"]
+    summary = json.loads((study / "lineage" / "summary.json").read_text())
+    before = summary["before_perturbation"]["last_trials"]
+    want = sum(cell["mean"] for cell in before.values()) / len(before)
+    assert rows["lineage"]["eye_before"] == {"mean": pytest.approx(want), "sd": 0.0, "n": 1}
+    assert rows["ξ = 1"]["critic_peak"]["mean"] > 0
+    assert [entry.split(":")[0] for entry in result["left_out"]] == [str(study / "other")]
+    assert json.loads(out.read_text())["table"]["single_5"].keys() == rows.keys()
+    assert "| lineage | 1 |" in capsys.readouterr().out
+
+
+def test_an_unwritable_json_is_one_line_and_exit_2(study, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    with pytest.raises(SystemExit) as exit_info:
+        sensitivity.main([str(study), "--json", str(blocker / "table.json")])
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err.count("\n") == 1
