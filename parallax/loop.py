@@ -88,7 +88,8 @@ def _presentation(
                 frames = run.frames(k)  # encode I(t)
                 out, seen[robots] = frames.output, frames.observations
                 if t == 0:  # a new trial: the step into it crossed the pan's reset
-                    previous[k] = previous[k] if policy.learn_reset_step else None
+                    if not policy.learn_reset_step:
+                        previous[k] = None
                     if policy.uses_reference_state:
                         images = stack_images(frames.observations, "reference", coder.device)
                         reference[k] = coder.encode(images, robots).output.state

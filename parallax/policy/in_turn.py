@@ -12,25 +12,21 @@ rows one by one.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import torch
-
-if TYPE_CHECKING:
-    from parallax.policy.natural_actor_critic import NaturalActorCritic
+from torch import nn
 
 
 @torch.no_grad()
 def apply_in_turn(
-    policy: NaturalActorCritic,
+    policy: nn.Module,
     features: torch.Tensor,
     action: torch.Tensor,
     reward: torch.Tensor,
     next_features: torch.Tensor,
 ) -> torch.Tensor | None:
     """The rows' steps one after the other, each from the parameters the previous row left (π(·|φ)
-    from the Θ it left), applied to ``policy``; returns their δ. Returns None and changes nothing
+    from the Θ it left), applied to ``policy`` (a NaturalActorCritic); returns their δ. Returns None and changes nothing
     where a step is not finite: the rows one by one then reject such a step on its own."""
     count = features.shape[0]
     as_numpy = lambda t: t.detach().to("cpu", torch.float64).numpy()  # noqa: E731
