@@ -26,8 +26,9 @@ def apply_in_turn(
     next_features: torch.Tensor,
 ) -> torch.Tensor | None:
     """The rows' steps one after the other, each from the parameters the previous row left (π(·|φ)
-    from the Θ it left), applied to ``policy`` (a NaturalActorCritic); returns their δ. Returns None and changes nothing
-    where a step is not finite: the rows one by one then reject such a step on its own."""
+    from the Θ it left), applied to ``policy`` (a NaturalActorCritic); returns their δ. Returns
+    None and changes nothing where a step is not finite: the rows one by one then reject such a
+    step on its own."""
     count = features.shape[0]
     as_numpy = lambda t: t.detach().to("cpu", torch.float64).numpy()  # noqa: E731
     gram, cross = as_numpy(features @ features.T), as_numpy(features @ next_features.T)
