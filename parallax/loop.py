@@ -79,6 +79,8 @@ def _presentation(
     previous: list[Step | None] = [None] * len(run.turns)  # each turn's last step, to learn from
     reference: list[torch.Tensor | None] = [None] * len(run.turns)  # θ(I0, I0) of each turn
     seen: list[dict] = [{} for _ in parts.worlds]  # each robot's latest observation
+    # every robot's transition is learnt (a row marked invalid would contribute nothing)
+    valid = [torch.ones(r.stop - r.start, dtype=torch.bool, device=coder.device) for r in run.turns]
     visited: list[int] = []
     run.reset()  # each world: its stimulus, I0 at l0
     while p is not None:  # for each lateral position l_p
@@ -102,8 +104,7 @@ def _presentation(
                 change = None if before is None else (rewards, before.rewards, before.increments)
                 state = policy.state(out.state, reference[k], pans, lateral[p], change)
                 if learn and before is not None:  # learn from the step into this image
-                    valid = torch.ones(len(pans), dtype=torch.bool, device=coder.device)
-                    transition = (before.state, before.action, out.reward, state, valid)
+                    transition = (before.state, before.action, out.reward, state, valid[k])
                     tally.updated(policy.update(*transition))
                 if t == last_t:  # where next, from the trial just ended (q_p)
                     if k == 0:

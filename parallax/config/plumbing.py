@@ -144,13 +144,18 @@ def upgrade_saved(config: Any) -> Any:
     the value that is what it did, so that reading a run back, resuming it and comparing it with
     a freshly composed config see the same settings. Apply it wherever one is read."""
     upgraded = copy.deepcopy(config)
+
+    def group_of(name: str) -> Any:  # the group's node, or None where the config has none
+        node = upgraded.get(name) if isinstance(upgraded, (dict, DictConfig)) else None
+        return node if isinstance(node, (dict, DictConfig)) else None
+
     for (group, key), names in RENAMED_CHOICES.items():
-        node = upgraded.get(group) if isinstance(upgraded, (dict, DictConfig)) else None
-        if isinstance(node, (dict, DictConfig)) and node.get(key) in names:
+        node = group_of(group)
+        if node is not None and node.get(key) in names:
             node[key] = names[node[key]]
     for (group, key), value in ADDED_SETTINGS.items():
-        node = upgraded.get(group) if isinstance(upgraded, (dict, DictConfig)) else None
-        if isinstance(node, (dict, DictConfig)) and key not in node:
+        node = group_of(group)
+        if node is not None and key not in node:
             node[key] = value
     return upgraded
 
