@@ -170,7 +170,7 @@ class Lockstep:
                     [ts.observation for ts in arrived], "image", self.coder.device
                 )
                 robots = slice(first_robot + first, first_robot + first + count)
-                encodings.append(self.coder.encode(images, robots))
+                encodings.append(self.coder.encode_frame(images, robots))
         self._encodings += encodings
         return Frames(
             observations=[ts.observation for ts in timesteps],

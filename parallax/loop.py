@@ -2,7 +2,8 @@
 
 For each lateral position, for each iteration, each turn of robots: encode I(t) (state θ,
 reward −(eC+eF)) → the policy learns from the step into it → act → the worlds step; the
-dictionary step from every turn's encoding; the pan at a trial's last iteration is q_p.
+dictionary step from every turn's encoding; the pan at a trial's last iteration is q_p (with the
+body sweeping L in one trial, env.motion=continuous: the pan as it passes l_p).
 
 An executor runs the steps that touch the worlds and the dictionaries: :class:`InOrder`, every
 step on this thread, or :class:`parallax.lockstep.Lockstep`, the same steps scheduled on threads
@@ -73,8 +74,8 @@ def _presentation(
 ) -> Presentation:
     coder, policy, task = parts.coder, parts.policy, parts.worlds[0].task
     lateral, last_t = list(task.lateral_positions), task.trial_length - 1
-    tally = Tally(len(parts.worlds), lateral, task.trial_length, routed=route is not None)
-    where_next = route or sweep(len(lateral))
+    tally = Tally(len(parts.worlds), lateral, task.trial_length, route is not None, task.continuous)
+    where_next = route or sweep(task.trials)  # continuous motion: one trial sweeps all of L
     p = _start(task, route, where_next([], tally.presentation(None, False)), len(parts.worlds))
     previous: list[Step | None] = [None] * len(run.turns)  # each turn's last step, to learn from
     reference: list[torch.Tensor | None] = [None] * len(run.turns)  # θ(I0, I0) of each turn
@@ -102,7 +103,8 @@ def _presentation(
                 tally.encoded(frames.observations, out, pans, rewards, p, robots)
                 before = previous[k]
                 change = None if before is None else (rewards, before.rewards, before.increments)
-                state = policy.state(out.state, reference[k], pans, lateral[p], change)
+                body = float(frames.observations[0]["lateral_position"])  # l_p, or x(t)
+                state = policy.state(out.state, reference[k], pans, body, change)
                 if learn and before is not None:  # learn from the step into this image
                     transition = (before.state, before.action, out.reward, state, valid[k])
                     tally.updated(policy.update(*transition))
@@ -169,7 +171,7 @@ class InOrder:
         robots = self.turns[turn]
         observations = self.observations[robots]
         images = stack_images(observations, "image", self.coder.device)
-        self.encodings.append(self.coder.encode(images, robots))
+        self.encodings.append(self.coder.encode_frame(images, robots))
         return Frames(observations, self.encodings[-1].output)
 
     def start_dictionary_step(self) -> None:

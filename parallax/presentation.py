@@ -39,6 +39,9 @@ class Presentation:
     # beyond the paper (§7): the positions of L a robot chose to visit, in order (indices into
     # L; the other positions' pans are NaN); None when it swept the whole list
     route: list[int] | None = None
+    # beyond the paper (env.motion=continuous): the eye's mean |α − α*| over the sweep's
+    # iterations and the retinal slip, the mean |Δ(α* − α)| per iteration (deg); None otherwise
+    motion: dict[str, float] | None = None
     # seconds the loop's thread spent waiting in the lockstep (parallax.lockstep.WAITS): for
     # frames, for the dictionary step, encoding; the rest of its time is the policy's turn
     waits: dict[str, float] = field(default_factory=dict)
@@ -61,10 +64,18 @@ class Tally:
     """What one presentation reports (:class:`Presentation`), gathered iteration by iteration."""
 
     def __init__(
-        self, robots: int, lateral: list[float], trial_length: int, routed: bool = False
+        self,
+        robots: int,
+        lateral: list[float],
+        trial_length: int,
+        routed: bool = False,
+        continuous: bool = False,
     ) -> None:
         self.lateral, self.trial_length = lateral, trial_length
         shape = (robots, len(lateral))
+        # the body sweeping L in one trial: q_p is read as it passes l_p, between the iterations
+        # either side (each robot's last body offset, pan and α*), and the pursuit is tallied
+        self.sweep = _SweepTally(robots, lateral) if continuous else None
         # on a chosen route the positions never visited keep NaN
         blank = np.full(shape, np.nan) if routed else np.zeros(shape)
         self.pans, self.targets, self.start_pans = blank.copy(), blank.copy(), blank.copy()
@@ -91,6 +102,11 @@ class Tally:
         for scale, e in out.errors.items():
             self.error_sums[scale] = self.error_sums.get(scale, 0.0) + float(e.sum())
         self.encodings += len(rewards)
+        if self.sweep is not None:
+            self.sweep.passed(obs, pans, robots, self.pans, self.targets)
+            if iteration == 0:
+                self.start_pans[robots] = pans[:, None]
+            return
         if iteration == 0:
             self.start_pans[robots, p] = pans
         best = self.best_rewards[robots, p]
@@ -121,7 +137,7 @@ class Tally:
             lateral_positions=self.lateral,
             pans=self.pans,
             targets=self.targets,
-            best_pans=self.best_pans,
+            best_pans=self.pans if self.sweep is not None else self.best_pans,
             distances=np.array([float(o["distance"]) for o in obs] if obs else [np.nan] * robots),
             textures=np.array([int(o["texture_index"]) for o in obs] if obs else [-1] * robots),
             steps=self.encodings // robots,
@@ -131,4 +147,51 @@ class Tally:
             last_view=view,
             start_pans=self.start_pans,
             route=None if self.visited is None else list(self.visited),
+            motion=None if self.sweep is None else self.sweep.summary(),
         )
+
+
+class _SweepTally:
+    """q_p and α* as the body passes each l_p of a continuous sweep (linear between the two
+    iterations either side of it), and the pursuit's tracking error and retinal slip."""
+
+    def __init__(self, robots: int, lateral: list[float]) -> None:
+        self.lateral = np.asarray(lateral, dtype=np.float64)
+        self.last = np.full((robots, 3), np.nan)  # each robot's last body offset, pan and α*
+        self.tracking_sum = self.slip_sum = 0.0
+        self.tracked = self.slips = 0
+
+    def passed(
+        self, obs: list[dict], pans: np.ndarray, robots: slice, q: np.ndarray, targets: np.ndarray
+    ) -> None:
+        """The turn ``robots`` saw ``obs`` at ``pans``: fill q_p and α* (``q``, ``targets``, (B, r))
+        at every l_p passed since its last iteration (at the first: every l_p ≤ x(0))."""
+        now = np.array(
+            [
+                [float(o["lateral_position"]), pan, float(o["target_pan"])]
+                for o, pan in zip(obs, pans)
+            ]
+        )
+        before = self.last[robots]
+        self.tracking_sum += float(np.abs(now[:, 2] - now[:, 1]).sum())
+        self.tracked += len(now)
+        moved = ~np.isnan(before[:, 0])
+        # the panel's image moves on the retina by the change of the gaze's error α* − α
+        slip = (now[moved, 2] - now[moved, 1]) - (before[moved, 2] - before[moved, 1])
+        self.slip_sum += float(np.abs(slip).sum())
+        self.slips += int(moved.sum())
+        for i, b in enumerate(range(*robots.indices(q.shape[0]))):
+            start = before[i] if moved[i] else now[i]
+            lower = start[0] if moved[i] else -np.inf
+            for p in np.flatnonzero((self.lateral > lower) & (self.lateral <= now[i, 0])):
+                span = now[i, 0] - start[0]
+                share = (self.lateral[p] - start[0]) / span if span > 0 else 1.0
+                q[b, p] = start[1] + share * (now[i, 1] - start[1])
+                targets[b, p] = start[2] + share * (now[i, 2] - start[2])
+        self.last[robots] = now
+
+    def summary(self) -> dict[str, float]:
+        return {
+            "tracking_error_deg": self.tracking_sum / max(self.tracked, 1),
+            "retinal_slip_deg": self.slip_sum / max(self.slips, 1),
+        }

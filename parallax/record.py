@@ -94,6 +94,9 @@ class PresentationRecord:
     start_jitter: bool
     learnt_distance: bool
     walks: Walks | None  # None: the robots did not walk (or not this presentation)
+    # env.motion=continuous: the pursuit during the sweep (parallax.presentation.Presentation.
+    # motion: tracking_error_deg, retinal_slip_deg); None (and no key in the line) otherwise
+    motion: Mapping[str, float] | None
     route: Route | None  # None: no planner
     distance_stats: Mapping[str, Any]  # the distance learner's last fit: lm_<k>
 
@@ -119,6 +122,7 @@ class PresentationRecord:
             "start_jitter": self.start_jitter,
             "learnt_distance": self.learnt_distance,
             **(self.walks.to_json() if self.walks is not None else {}),
+            **(dict(self.motion) if self.motion is not None else {}),
             **(self.route.to_json() if self.route is not None else {}),
             **{f"lm_{k}": v for k, v in self.distance_stats.items()},
         }
@@ -145,3 +149,5 @@ class PresentationRecord:
             yield from self.route.scalars()
         if self.walks is not None:
             yield from self.walks.scalars()
+        for k, v in (self.motion or {}).items():
+            yield f"motion/{k}", v

@@ -206,6 +206,7 @@ class Trainer:
             start_jitter=jittered,
             learnt_distance=learnt_distance,
             walks=walked,
+            motion=pres.motion,
             route=moved,
             distance_stats=dict(self.last_distance_stats),
         )

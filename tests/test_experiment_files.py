@@ -1,8 +1,8 @@
 """The experiment files are the record of every result: the paper's algorithm with the settings
 it leaves open taken from the code it builds on (conf/experiment/paper_*.yaml) or chosen by us
 (unsourced_*.yaml), our recipe (recipe_*.yaml, quickstart.yaml) and, beyond the paper, distance
-from the robot's own body (embodied_*.yaml) and a robot that plans its movement
-(planned_*.yaml)."""
+from the robot's own body (embodied_*.yaml), a robot that plans its movement (planned_*.yaml)
+and a body that sweeps L while the eye pursues (continuous_*.yaml)."""
 
 from pathlib import Path
 
@@ -25,6 +25,8 @@ SETUPS = [
 ]
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "docs" / "results" / "checkpoints"
 STEP_SIZES = Path(__file__).resolve().parents[1] / "conf" / "step_sizes"
+#: The body sweeping L, compared with the recipe before its perturbation: it has none.
+CONTINUOUS = "continuous_multi_5_20_weighted"
 #: The families over the paper's set-ups, each <family>_<setup>.yaml for every set-up.
 FAMILIES = ["paper", "unsourced", "recipe"]
 
@@ -41,6 +43,7 @@ def test_every_setup_has_every_family_and_nothing_else():
         [f"{family}_{s}" for family in FAMILIES for s in SETUPS]
         + ["paper_algorithm", "unsourced_algorithm", "quickstart"]
         + ["embodied_multi_5_20_weighted", "embodied_growth", "planned_multi_5_20_weighted"]
+        + [CONTINUOUS]
         + ["sensitivity_single_5", "sensitivity_multi_5_10"]
         + [f"without_{improvement}" for improvement in WITHOUT]
     )
@@ -91,7 +94,7 @@ def test_each_leave_one_out_file_puts_back_the_unsourced_settings_of_one_improve
 @pytest.mark.parametrize("name", sorted(p.stem for p in EXPERIMENTS.glob("*.yaml")))
 def test_every_experiment_composes_and_validates(name):
     flat = _flat([f"experiment={name}"])
-    if not name.endswith("_algorithm") and name != "quickstart":
+    if not name.endswith("_algorithm") and name not in ("quickstart", CONTINUOUS):
         # every set-up of Tables 2–5 has §5's perturbation in the same run (Tables 3 and 5)
         assert flat["perturbation.camera_rotation_deg"] == 15.0
         assert flat["perturbation.blur_sigma"] == 2.0

@@ -92,8 +92,15 @@ def test_same_seed_same_metrics_other_seed_differs(tmp_path, tiny_overrides):
         ["policy.feature_norm=difference"],
         # the jitter ends after the resume point: the resumed run must switch it off
         ["env.initial_pan_jitter_deg=1", "train.start_jitter_presentations=5"],
+        # the body sweeps L while the eye pursues, each image coded against the one before
+        [
+            "env.motion=continuous",
+            "env.sweep.speed_m=0.01",
+            "train.distance_readout=last",
+            "coder.pairing=consecutive",
+        ],
     ],
-    ids=["shipped", "difference", "jitter_until_5"],
+    ids=["shipped", "difference", "jitter_until_5", "continuous_consecutive"],
 )
 def test_resume_in_process_matches_uninterrupted(tmp_path, tiny_overrides, extra):
     # feature_norm=difference adds one (I0, I0) encode per trial; still same seed, same numbers

@@ -118,6 +118,7 @@ class MultiScaleCoder(nn.Module):
         learn: bool = CoderConfig.learn,
         pursuit: str = "gram",
         robot_updates: str = CoderConfig.robot_updates,
+        pairing: str = CoderConfig.pairing,
     ) -> None:
         super().__init__()
         scales = [str(name) for name in scales]
@@ -146,6 +147,7 @@ class MultiScaleCoder(nn.Module):
         self.atoms = int(atoms)
         self.learn = bool(learn)
         self.normalisation = normalisation
+        self.pairing = str(pairing)
         self.coders = nn.ModuleDict(coders)
 
     @property
@@ -169,14 +171,19 @@ class MultiScaleCoder(nn.Module):
             self.coders[name].set_reference(gray)
 
     @torch.no_grad()
-    def encode(self, images: Any, robots: slice = slice(None)) -> Encoding:
-        """Encode I(t) against the cached I0 of ``robots`` (all by default), without learning.
+    def encode(
+        self, images: Any, robots: slice = slice(None), next_reference: bool = False
+    ) -> Encoding:
+        """Encode I(t) against the cached I0 of ``robots`` (all by default), without learning;
+        ``next_reference``: the images then become those robots' references.
 
         A lockstep may encode its robots chunk by chunk as their frames arrive and then learn from
         all the chunks at once: the outputs and the dictionary step are those of one call.
         """
         gray = as_gray_batch(images, self.device)
-        encoded = self._each_scale(lambda name: self.coders[name].encode_images(gray, robots))
+        encoded = self._each_scale(
+            lambda name: self.coders[name].encode_images(gray, robots, next_reference)
+        )
         errors = {name: output.error for name, (output, _) in encoded.items()}
         state = torch.cat([encoded[name][0].activity for name in self.scales], dim=1)
         reward = -torch.stack(list(errors.values())).sum(dim=0)
@@ -184,6 +191,12 @@ class MultiScaleCoder(nn.Module):
             output=CoderOutput(state=state, reward=reward, errors=errors),
             codes={name: code for name, (_, code) in encoded.items()},
         )
+
+    def encode_frame(self, images: Any, robots: slice = slice(None)) -> Encoding:
+        """Encode the robots' newest images I(t) in the configured pairing: against I0
+        (reference), or against each robot's previous image, which I(t) then replaces
+        (consecutive; the cache holds I0 after :meth:`set_reference`, so I(−1) is I0)."""
+        return self.encode(images, robots, next_reference=self.pairing == "consecutive")
 
     @torch.no_grad()
     def learn_from(self, encodings: Encoding | Sequence[Encoding]) -> None:

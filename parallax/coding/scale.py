@@ -164,11 +164,22 @@ class ScaleCoder(nn.Module):
 
     @torch.no_grad()
     def encode_images(
-        self, gray: torch.Tensor, robots: slice = slice(None)
+        self, gray: torch.Tensor, robots: slice = slice(None), next_reference: bool = False
     ) -> tuple[ScaleOutput, SparseCode]:
         """θ^j and e^j of (B,H,W) gray images against the references of ``robots``, and the
-        sparse code a dictionary step learns from; the dictionary is left alone."""
+        sparse code a dictionary step learns from; the dictionary is left alone.
+        ``next_reference``: the images then become those robots' references (the consecutive
+        pairing, (I(t−1), I(t)))."""
         reference, raw = self._reference_and_raw(gray, robots)
+        try:
+            return self._encode_pairs(reference, raw)
+        finally:
+            if next_reference:
+                self.reference[robots] = prepare_reference(raw, self.normalisation)
+
+    def _encode_pairs(
+        self, reference: torch.Tensor, raw: torch.Tensor
+    ) -> tuple[ScaleOutput, SparseCode]:
         batch, patches = raw.shape[:2]
         # θ straight from the picks where the compiled kernel gives torch's θ exactly: the dense
         # (M, N) codes are most of the pursuit's memory traffic.

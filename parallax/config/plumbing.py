@@ -8,6 +8,7 @@ The settings themselves are in :mod:`parallax.config.schema`; their checks in
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import re
 from collections.abc import Sequence
@@ -16,7 +17,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from parallax.config.schema import Config, register
+from parallax.config.schema import Config, SweepConfig, register
 
 #: The Hydra config package; ``conf/`` ships inside the installed package as ``parallax.conf``.
 CONFIG_MODULE = "parallax.conf"
@@ -134,7 +135,12 @@ RENAMED_CHOICES = {
     ("policy", "robot_updates"): {"in_turn": "each"},
 }
 #: Settings an older parallax did not have, and the value that is what it did.
-ADDED_SETTINGS = {("policy", "learn_reset_step"): False}
+ADDED_SETTINGS = {
+    ("policy", "learn_reset_step"): False,
+    ("coder", "pairing"): "reference",
+    ("env", "motion"): "pick_and_place",
+    ("env", "sweep"): dataclasses.asdict(SweepConfig()),  # unread by pick-and-place
+}
 
 
 def upgrade_saved(config: Any) -> Any:

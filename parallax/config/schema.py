@@ -64,6 +64,17 @@ class StimuliConfig:
 
 
 @dataclass
+class SweepConfig:
+    """Beyond the paper: the body's continuous sweep from l0 to the end of L in one trial
+    (``env.motion=continuous``; parallax.envs.sweep)."""
+
+    #: Mean lateral speed, metres per iteration (0.002: 5–20 cm in 101 iterations).
+    speed_m: float = 0.002
+    #: constant | smooth: a minimum-jerk path, still at both ends (peak speed 1.875× the mean).
+    profile: str = "constant"
+
+
+@dataclass
 class WalkConfig:
     """Beyond the paper (its second future work, §7): the body's walk straight to the panel after
     a presentation's lateral sweep, until its left hand touches it (parallax.envs.walk). Only
@@ -107,6 +118,11 @@ class EnvConfig:
     initial_pan_jitter_deg: float = 0.0
     #: Largest pan increment the world accepts, degrees (A = {±0.2, ±0.1, ±0.05, 0}, §3.4).
     max_pan_increment_deg: float = 0.2
+    #: pick_and_place: the body is set down at each position of L for t_h iterations (§4.1) |
+    #: continuous: it sweeps from l0 to the end of L in one trial while the eye acts (``sweep``;
+    #: beyond the paper), and q_p is the pan as it passes l_p.
+    motion: str = "pick_and_place"
+    sweep: SweepConfig = field(default_factory=SweepConfig)
     stimuli: StimuliConfig = field(default_factory=StimuliConfig)
     #: B robots in lockstep, each with its own stimulus, distance and pan; one coder and policy
     #: call serves all of them (beyond the paper, for speed; B = 1 is the paper's single robot).
@@ -160,6 +176,9 @@ class CoderConfig:
     normalisation: str = "per_half"
     #: false freezes the dictionaries.
     learn: bool = True
+    #: The image pairs coded: reference, (I0, I(t)) (§3.2) | consecutive, (I(t−1), I(t)), the
+    #: retinal slip (beyond the paper; I(−1) is I0).
+    pairing: str = "reference"
     #: B robots in lockstep (ROBOT_UPDATES): each (beyond the paper: the sum of every robot's own
     #: step, so every robot's patches teach in full) | mean (one step on the mean over all their
     #: patches, so B robots teach the dictionaries as much as one).

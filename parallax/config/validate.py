@@ -39,6 +39,8 @@ RUN_TIME_KEYS = frozenset(
 RESUME_FROM = ("latest", "previous")
 #: movement.route: the paper's sweep of L, or the route the robot plans (beyond the paper, §7).
 ROUTES = ("list", "planned")
+#: coder.pairing: the paper's (I0, I(t)), or consecutive images (I(t−1), I(t)).
+PAIRINGS = ("reference", "consecutive")
 #: The eye image sizes the world can render (parallax.envs.hoap3.Physics.create).
 IMAGE_SIZES = (16, 2048)
 
@@ -133,6 +135,7 @@ def validate(cfg: DictConfig) -> None:
     _perturbation(check)
     _walk(check)
     _movement(check)
+    _motion(check)
     _stimuli(check)  # last: a folder of images is decoded here (once per process)
 
 
@@ -369,6 +372,41 @@ def _movement(check: _Checks) -> None:
                 check.get("curriculum.stages"),
                 "movement.route=planned plans over all of L: leave the stages null",
             )
+
+
+def _motion(check: _Checks) -> None:
+    from parallax.envs.sweep import (
+        MOTIONS,
+        SWEEP_PROFILES,
+        fastest_followable_speed_m,
+        fastest_target_pan_deg,
+    )
+
+    check.choice("coder.pairing", PAIRINGS)
+    motion = check.choice("env.motion", MOTIONS)
+    speed = check.number("env.sweep.speed_m", above=0, what=" (metres per iteration)")
+    profile = check.choice("env.sweep.profile", SWEEP_PROFILES)
+    if motion != "continuous":
+        return
+    if check.get("movement.route") != "list":
+        check.fail("movement.route", check.get("movement.route"), "env.motion=continuous sweeps L")
+    if check.get("train.distance_readout") != "last":
+        check.fail(
+            "train.distance_readout",
+            check.get("train.distance_readout"),
+            "env.motion=continuous has one trial a presentation: q_p is the pan at l_p (last)",
+        )
+    # the eye must be able to keep up with the target where it turns fastest
+    nearest = float(check.get("env.distances.start"))
+    step = max(abs(float(a)) for a in check.get("policy.actions"))
+    if fastest_target_pan_deg(speed, profile, nearest) > step + 1e-12:
+        check.fail(
+            "env.sweep.speed_m",
+            speed,
+            f"the target's pan turns up to {fastest_target_pan_deg(speed, profile, nearest):.3g}° "
+            f"an iteration at {nearest:g} m ({profile} profile), faster than the eye's largest "
+            f"step {step:g}°: at most {fastest_followable_speed_m(step, profile, nearest):.4g} m",
+        )
 
 
 def _curriculum(check: _Checks) -> None:

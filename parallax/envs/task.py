@@ -9,6 +9,10 @@ its increment, then picks the robot up and puts it down at l_{p+1} with the pan 
 (paper default) or kept. The observation at iteration t_h−1 carries q_p, the pan of eq. (16);
 the last one of l_r ends the episode, so an episode has r·t_h observations.
 
+Beyond the paper, ``motion="continuous"``: the episode is one trial in which the body sweeps from
+l0 to l_r (parallax.envs.sweep), moved on at every step while the eye turns; it has the sweep's
+T observations, and the pans at the body offsets of L are read as it passes them.
+
 Reward: −|α − α*| in degrees, a diagnostic (the learner's reward comes from the coder, eq. 6).
 """
 
@@ -27,6 +31,7 @@ from dm_env import specs
 from parallax.config.schema import EnvConfig, PerturbationConfig, default
 from parallax.envs.hoap3 import Physics, check_distance
 from parallax.envs.stimuli import load_stimuli
+from parallax.envs.sweep import body_offsets
 from parallax.geometry import ACTION_SET_DEG
 
 
@@ -81,8 +86,12 @@ class LateralPursuitTask(base.Task):
         max_pan_increment_deg: float = EnvConfig.max_pan_increment_deg,
         random: Any = None,
         initial_pan_jitter_deg: float = EnvConfig.initial_pan_jitter_deg,
+        motion: str = EnvConfig.motion,
+        sweep: Mapping[str, Any] = default(EnvConfig, "sweep"),
     ):
         super().__init__(random=random)
+        self._continuous = motion == "continuous"
+        self._sweep_speed, self._sweep_profile = float(sweep["speed_m"]), str(sweep["profile"])
         self._initial_pan_jitter = float(initial_pan_jitter_deg)
         self._pending_positions = check_lateral_positions(lateral_positions)
         self._episode_positions = self._pending_positions
@@ -102,6 +111,7 @@ class LateralPursuitTask(base.Task):
         # position, and whether the running episode is one
         self._pending_route: float | None = None
         self._open_route = False
+        self._offsets: np.ndarray | None = None  # the running sweep's x(t), when continuous
 
     # --- settings the trainer changes --------------------------------------------------------
     def attach(self, physics: Physics) -> None:
@@ -123,8 +133,25 @@ class LateralPursuitTask(base.Task):
         return self._episode_positions
 
     @property
+    def continuous(self) -> bool:
+        """Whether the body sweeps L in one trial (env.motion=continuous) instead of being set
+        down at each position for t_h iterations."""
+        return self._continuous
+
+    @property
+    def trials(self) -> int:
+        """Trials per presentation of the next episode: one per position of L, or one sweep."""
+        return 1 if self._continuous else len(self._pending_positions)
+
+    @property
     def trial_length(self) -> int:
+        """Iterations per trial: t_h, or the sweep's T (parallax.envs.sweep)."""
+        if self._continuous:
+            return len(self._sweep_offsets(self._pending_positions))
         return self._trial_length
+
+    def _sweep_offsets(self, lateral_positions: Sequence[float]) -> np.ndarray:
+        return body_offsets(lateral_positions[-1], self._sweep_speed, self._sweep_profile)
 
     @property
     def distances(self) -> tuple[float, ...]:
@@ -225,7 +252,9 @@ class LateralPursuitTask(base.Task):
         reference = physics.render_left_eye()
         reference.setflags(write=False)
         self._reference = reference
-        physics.set_lateral_position(self._episode_positions[0])
+        self._offsets = self._sweep_offsets(self._episode_positions) if self._continuous else None
+        first = 0.0 if self._continuous else self._episode_positions[0]
+        physics.set_lateral_position(first)
         physics.set_pan_deg(self._trial_start_pan())
         self._position_index = 0
         self._iteration = 0
@@ -233,6 +262,10 @@ class LateralPursuitTask(base.Task):
     def before_step(self, action: Any, physics: Physics) -> None:
         increment = self._pan_increment(action)
         physics.set_pan_deg(physics.pan_deg() + increment)
+        if self._offsets is not None:  # the sweep: the body moves on while the eye turns
+            self._iteration += 1
+            physics.set_lateral_position(float(self._offsets[self._iteration]))
+            return
         if self._iteration < self._trial_length - 1:
             self._iteration += 1
             return
@@ -284,6 +317,8 @@ class LateralPursuitTask(base.Task):
     def get_termination(self, physics: Physics) -> float | None:
         if self._open_route:  # the robot ends a route by stopping
             return None
+        if self._offsets is not None:
+            return 1.0 if self._iteration == len(self._offsets) - 1 else None
         last_position = self._position_index == len(self._episode_positions) - 1
         if last_position and self._iteration == self._trial_length - 1:
             return 1.0
@@ -336,6 +371,8 @@ def load(
     blur_sigma: float = PerturbationConfig.blur_sigma,
     max_pan_increment_deg: float = EnvConfig.max_pan_increment_deg,
     initial_pan_jitter_deg: float = EnvConfig.initial_pan_jitter_deg,
+    motion: str = EnvConfig.motion,
+    sweep: Mapping[str, Any] = default(EnvConfig, "sweep"),
 ) -> PursuitEnvironment:
     """The HOAP-3 lateral-pursuit world as a dm_control environment (see the module docstring);
     ``load(seed=0)`` is the default task, every default the schema's (EnvConfig,
@@ -358,6 +395,8 @@ def load(
         max_pan_increment_deg=max_pan_increment_deg,
         random=seed,
         initial_pan_jitter_deg=initial_pan_jitter_deg,
+        motion=motion,
+        sweep=sweep,
     )
     physics = Physics.create(texture_set, image_size=image_size, max_distance_m=max(grid))
     physics.set_perturbation(

@@ -343,3 +343,24 @@ def test_scale_ablation_is_one_override() -> None:
         )
     coder = instantiate(config.coder, image_size=256, seed=0)
     assert coder.scales == ["coarse"] and coder.learn is False
+
+
+@pytest.mark.parametrize("pursuit", ["gram", "recompute"])
+def test_the_consecutive_pairing_codes_each_image_against_the_one_before(pursuit: str) -> None:
+    frames = [_photo_batch(2, shift=s) for s in (0, 3, 6)]
+    consecutive = _coder(pairing="consecutive", pursuit=pursuit)
+    consecutive.set_reference(frames[0])  # I(−1) is I0
+    against_previous = _coder(pursuit=pursuit)
+    for before, now in zip(frames, frames[1:]):
+        against_previous.set_reference(before)
+        expected = against_previous.encode_frame(now).output
+        got = consecutive.encode_frame(now).output
+        torch.testing.assert_close(got.state, expected.state, rtol=0, atol=0)
+        torch.testing.assert_close(got.reward, expected.reward, rtol=0, atol=0)
+    # one robot at a time moves only its own reference on
+    consecutive.set_reference(frames[0])
+    consecutive.encode_frame(frames[1][1:], robots=slice(1, 2))
+    first = consecutive.encode(frames[0][:1], robots=slice(0, 1)).output.reward
+    against_previous.set_reference(frames[0])
+    same = against_previous.encode(frames[0][:1], robots=slice(0, 1)).output.reward
+    torch.testing.assert_close(first, same, rtol=0, atol=0)

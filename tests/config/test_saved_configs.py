@@ -59,7 +59,7 @@ def test_the_older_words_are_each_and_nothing_else_changes():
     assert rest == {key: value for key, value in saved.items() if key not in OLDER_WORDS}
     for word in ROBOT_UPDATES:
         policy = {"robot_updates": word, "learn_reset_step": False}
-        chosen = {"coder": {"robot_updates": word}, "policy": policy}
+        chosen = {"coder": {"robot_updates": word, "pairing": "reference"}, "policy": policy}
         assert upgrade_saved(chosen) == chosen
     assert upgrade_saved({}) == {}
     dict_config = upgrade_saved(OmegaConf.create(saved))

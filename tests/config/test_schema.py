@@ -128,6 +128,8 @@ PART_DEFAULTS = [
             "max_pan_increment_deg": EnvConfig.max_pan_increment_deg,
             "initial_pan_jitter_deg": EnvConfig.initial_pan_jitter_deg,
             "random": None,
+            "motion": EnvConfig.motion,
+            "sweep": default(EnvConfig, "sweep"),
         },
     ),
     (
