@@ -1,0 +1,170 @@
+"""Distance from a continuous sweep's pursuit, and when to stop moving (beyond the paper: its
+§4.1 pick-and-place made continuous; its first future work, §7, "decide when to stop moving
+laterally").
+
+For evaluations (parallax-eval) of runs with ``env.motion=continuous``, on the held-out
+photographs, it prints two tables:
+
+- **What to read from the pursuit.** The distance error of a fresh distance learner of the run's
+  settings, fitted by 5-fold cross-validation to the evaluation's own eye movements, fed either
+  s, the pans as the body passes l_1 … l_r (what training uses), or one number, the pursuit gain
+  g = Σ l_p·tan q_p / Σ l_p² (the slope of tan α against the body offset, ≈ 1/d for a perfect
+  pursuit): does the eye's trajectory carry more than its slope?
+- **When to stop moving.** In a sweep the pans at the first offsets do not depend on whether the
+  body goes on, so stopping after l_p is the sweep cut short there. The movement planner
+  (:class:`parallax.distance.planner.MovementPlanner`, its queue the run's last c training
+  sweeps) estimates the distance from the pans passed so far; the fixed curve stops every
+  presentation at l_p; the planned rows stop where the expected error plus the price of the
+  travel (``movement.price_per_cm`` percentage points per cm, out and back) is least for the
+  estimate so far, price by price. Each row: the mean lateral travel and the distance error.
+
+    python -m parallax.tools.analysis.continuous EVAL_DIR… [--prices 0 0.01 …] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from parallax.config import load_run_config
+from parallax.distance.metrics import distance_error_by_range
+from parallax.distance.planner import MovementPlanner
+from parallax.tools.analysis.eye_bound import network_cross_validated
+from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, read_record
+
+#: Prices of travel (percentage points of expected distance error per cm) for the planned rows.
+PRICES = (0.0, 0.005, 0.01, 0.02, 0.05, 0.1)
+
+
+def pursuit_gain(pans_deg: np.ndarray, lateral_m: np.ndarray) -> np.ndarray:
+    """g = Σ l_p·tan q_p / Σ l_p² per presentation (rows of ``pans_deg``), in 1/m."""
+    return np.tan(np.radians(pans_deg)) @ lateral_m / float(lateral_m @ lateral_m)
+
+
+def training_sweeps(run_dir: Path, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The run's last ``count`` training vectors s (every robot's) and their distances."""
+    pans, distances = [], []
+    for line in read_record(run_dir / METRICS_NAME).splitlines():
+        record = json.loads(line)
+        pans += record["pans"]
+        distances += record["distances"]
+    return np.asarray(pans[-count:], float), np.asarray(distances[-count:], float)
+
+
+def fixed_stop(planner: MovementPlanner, pans: np.ndarray, last: int) -> tuple:
+    """Every presentation stops after l_``last``: where, and the planner's estimates there."""
+    seen = list(range(last + 1))
+    stops = np.full(len(pans), last)
+    return stops, np.array([planner.estimate(seen, s[: last + 1]) for s in pans])
+
+
+def planned_stop(planner: MovementPlanner, pans: np.ndarray, price_per_cm: float) -> tuple:
+    """Each presentation goes on past l_p while some longer sweep has a lower expected error
+    plus price of travel, for the estimate from the pans passed so far: where it stops (indices
+    into L) and its estimate there."""
+    planner.price_per_cm = float(price_per_cm)
+    r = pans.shape[1]
+    stops, estimates = [], []
+    for s in pans:
+        stop = 0
+        while stop < r - 1:
+            seen = list(range(stop + 1))
+            near = planner.estimate(seen, s[: stop + 1])
+            costs = [
+                planner.expected_error(list(range(q + 1)), seen, near)
+                + planner.price(list(range(q + 1)))
+                for q in range(stop, r)
+            ]
+            if int(np.argmin(costs)) == 0:
+                break
+            stop += 1
+        stops.append(stop)
+        estimates.append(planner.estimate(list(range(stop + 1)), s[: stop + 1]))
+    return np.asarray(stops), np.asarray(estimates)
+
+
+def analyse(eval_dir: Path, prices=PRICES) -> dict:
+    result = json.loads(read_record(Path(eval_dir) / EVAL_NAME))
+    cfg = load_run_config(result["run_dir"])
+    if cfg.env.motion != "continuous":
+        raise ValueError(f"{eval_dir}: its run did not sweep (env.motion={cfg.env.motion})")
+    distances = np.asarray(result["greedy_samples"]["grid"]["distances"], float)
+    pans = np.asarray(result["greedy_samples_by_readout"]["last"]["grid"]["pans"], float)
+    lateral = np.asarray([float(l) for l in cfg.curriculum.lateral_positions])
+
+    def error(estimates) -> dict:
+        return distance_error_by_range(np.asarray(estimates), distances)
+
+    one_number = cfg.copy()  # the gain as a one-position vector, unweighted
+    one_number.curriculum.lateral_positions = [float(lateral[-1])]
+    one_number.distance.weighting = False
+    readouts = {
+        "pans at the offsets of L": error(network_cross_validated(cfg, pans, distances)),
+        "pursuit gain": error(
+            network_cross_validated(one_number, pursuit_gain(pans, lateral)[:, None], distances)
+        ),
+    }
+    queue = training_sweeps(Path(result["run_dir"]), int(cfg.distance.queue_size))
+    planner = MovementPlanner(list(lateral), queue_size=len(queue[1]), price_per_trial=0.0)
+    for s, d in zip(*queue):
+        planner.observe(s, float(d))
+    rules = [(f"fixed: to {100 * l:g} cm", fixed_stop, p) for p, l in enumerate(lateral)]
+    rules += [(f"planned: {price:g} per cm", planned_stop, price) for price in prices]
+    rows = []
+    for label, rule, setting in rules:
+        stops, estimates = rule(planner, pans, setting)
+        travel = 2 * 100 * lateral[stops]  # out and back, as the planner prices it
+        rows.append({"rule": label, "travel_cm": float(travel.mean()), **error(estimates)})
+    return {"eval": str(eval_dir), "readouts": readouts, "stopping": rows}
+
+
+def _writable(path: Path) -> bool:
+    folder = path.parent
+    return folder.is_dir() and not path.is_dir() and os.access(folder, os.W_OK)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.tools.analysis.continuous", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("evals", nargs="+", metavar="EVAL_DIR", help="folders with an eval.json")
+    parser.add_argument("--prices", nargs="+", type=float, default=list(PRICES))
+    parser.add_argument("--json", default=None, help="also write the results to this JSON file")
+    args = parser.parse_args(argv)
+    if any(not math.isfinite(p) or p < 0 for p in args.prices):
+        print(f"continuous: error: --prices {args.prices}: must be ≥ 0", file=sys.stderr)
+        sys.exit(2)
+    if args.json and not _writable(Path(args.json)):
+        print(f"continuous: error: cannot write --json {args.json}", file=sys.stderr)
+        sys.exit(2)
+    try:
+        results = [analyse(Path(folder), args.prices) for folder in args.evals]
+    except (FileNotFoundError, ValueError, KeyError) as exc:
+        print(f"continuous: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    for result in results:
+        print(f"\n{result['eval']}\n\n| readout | 3-4.9 m | 5-6.9 m | 7-10 m | total |")
+        print("|---|---|---|---|---|")
+        for name, e in result["readouts"].items():
+            print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in e.values()) + " |")
+        print("\n| stop | lateral travel (cm) | 3-4.9 m | 5-6.9 m | 7-10 m | total |")
+        print("|---|---|---|---|---|---|")
+        for row in result["stopping"]:
+            values = [row[k] for k in ("3-4.9", "5-6.9", "7-10", "total")]
+            print(
+                f"| {row['rule']} | {row['travel_cm']:.1f} | "
+                + " | ".join(f"{v:.2f}" for v in values)
+                + " |"
+            )
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
