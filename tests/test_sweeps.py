@@ -388,3 +388,25 @@ def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
     assert replay.rstrip().endswith("open_setting=plain_lm")
     (table,) = [l for l in lines if "parallax.tools.analysis.sensitivity" in l]
     assert "--override=train.presentations=7" in table
+
+
+def test_the_continuous_script_trains_the_seeds_the_pairing_and_the_speed_curve(tmp_path):
+    from parallax.envs.sweep import fastest_followable_speed_m, sweep_iterations
+
+    lines = _dry_run("continuous.sh", tmp_path, "train.threads=1")
+    trained = [l for l in lines if l.startswith("parallax-train")]
+    assert (
+        "seed=0\\,1\\,2" in trained[0] and "experiment=continuous_multi_5_20_weighted" in trained[0]
+    )
+    assert "coder.pairing=consecutive" in trained[1]
+    speeds = [shlex.split(l) for l in trained[2:]]
+    fastest = fastest_followable_speed_m(0.2, "constant", 3.0)
+    for words in speeds:
+        speed = float(next(w for w in words if w.startswith("env.sweep.speed_m="))[18:])
+        runs = int(next(w for w in words if w.startswith("train.presentations="))[20:])
+        # every run of the curve is as long as the experiment's own, and followable at 3 m
+        assert abs(runs * sweep_iterations(0.2, speed) - 640 * 101) < 101
+        assert speed <= fastest
+    assert all(l.rstrip().endswith("train.threads=1") for l in trained)
+    (report,) = [l for l in lines if "parallax.tools.report.continuous" in l]
+    assert "--markdown" in report

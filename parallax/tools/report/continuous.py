@@ -1,0 +1,280 @@
+"""The report of the continuous sweep (beyond the paper's pick-and-place, §4.1; docs/continuous.md),
+beside the recipe's pick-and-place 5–20 cm weighted runs before their perturbation.
+
+From the evaluations (parallax-eval, held-out photographs) of:
+
+- RUNS: ``experiment=continuous_multi_5_20_weighted`` for several seeds;
+- ``--pairing``: the same with ``coder.pairing=consecutive``;
+- ``--speeds``: the same at other ``env.sweep.speed_m``;
+- ``--recipe``: the recipe's runs, whose ``recipe_multi_5_20_weighted`` models were evaluated
+  before their perturbation (RUN/eval_before);
+
+it writes five tables: the eye's error at the body offsets of L (Table 2's form); the distance
+error per range with the iterations a presentation takes; the two pairings; the error against
+body speed; and the error against lateral travel when the sweep stops early
+(:mod:`parallax.tools.analysis.continuous`). Mean ± standard deviation over seeds.
+
+    python -m parallax.tools.report.continuous RUNS --pairing DIR --speeds DIR --recipe DIR
+        [--json FILE] [--markdown FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from parallax.config import load_run_config
+from parallax.envs.sweep import fastest_target_pan_deg, sweep_iterations
+from parallax.tools.analysis.continuous import analyse
+from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, read_record, record_file
+
+RANGES = ("3-4.9", "5-6.9", "7-10", "total")
+RECIPE = "recipe_multi_5_20_weighted"
+#: The share of a run's last presentations whose online pursuit figures are averaged.
+LAST_SHARE = 0.1
+
+
+def _evaluated(folder: Path, eval_name: str = "") -> list[dict]:
+    """Every run below ``folder`` with an evaluation (RUN/[eval_name/]eval.json): the eval, the
+    run's config and its last presentations' pursuit figures, ordered by seed."""
+    found = []
+    for summary in sorted(folder.glob("*/summary.json")):
+        run = summary.parent
+        path = run / eval_name / EVAL_NAME
+        if record_file(path) is None:
+            continue
+        cfg = load_run_config(run)
+        found.append({"run": run, "cfg": cfg, "eval": json.loads(read_record(path))})
+    return sorted(found, key=lambda item: int(item["cfg"].seed))
+
+
+def _online_motion(run: Path) -> dict[str, float]:
+    """Mean tracking error and retinal slip (deg) over the run's last presentations."""
+    lines = [json.loads(line) for line in read_record(run / METRICS_NAME).splitlines()]
+    last = lines[-max(1, int(len(lines) * LAST_SHARE)) :]
+    keys = ("tracking_error_deg", "retinal_slip_deg")
+    return {k: float(np.mean([line[k] for line in last])) for k in keys if k in last[0]}
+
+
+def _spread(values) -> dict:
+    values = [float(v) for v in values]
+    sd = float(np.std(values, ddof=1)) if len(values) > 1 else math.nan
+    return {"mean": float(np.mean(values)), "sd": sd, "n": len(values)}
+
+
+def _text(cell: dict, digits: int = 2) -> str:
+    if cell["n"] == 1 or math.isnan(cell["sd"]):
+        return f"{cell['mean']:.{digits}f}"
+    return f"{cell['mean']:.{digits}f} ± {cell['sd']:.{digits}f}"
+
+
+def _iterations(cfg) -> int:
+    """Iterations (eye movements) a presentation takes."""
+    lateral = [float(l) for l in cfg.curriculum.lateral_positions]
+    if cfg.env.motion == "continuous":
+        return sweep_iterations(lateral[-1], float(cfg.env.sweep.speed_m))
+    return len(lateral) * int(cfg.env.trial_length)
+
+
+def build(runs: Path, pairing: Path, speeds: Path, recipe: Path) -> dict:
+    sweeps = _evaluated(runs)
+    if not sweeps:
+        raise FileNotFoundError(f"{runs}: no evaluated run (parallax-eval RUN first)")
+    picks = [
+        r
+        for r in _evaluated(recipe, "eval_before")
+        if r["run"].name.startswith(f"experiment={RECIPE},")
+    ]
+    labels = list(sweeps[0]["eval"]["mae_per_position"]["greedy"])
+    tracking = {
+        label: {
+            "continuous": _spread(r["eval"]["mae_per_position"]["greedy"][label] for r in sweeps),
+            "pick_and_place": _spread(
+                r["eval"]["mae_per_position"]["greedy"][label] for r in picks
+            ),
+        }
+        for label in labels
+    }
+
+    def distance(items) -> dict:
+        return {k: _spread(r["eval"]["distance"]["by_range"][k] for r in items) for k in RANGES}
+
+    compared = {
+        "continuous": {
+            **distance(sweeps),
+            "iterations": _iterations(sweeps[0]["cfg"]),
+            "training_iterations": int(sweeps[0]["eval"]["presentations"])
+            * _iterations(sweeps[0]["cfg"]),
+        },
+        "pick_and_place": {
+            **distance(picks),
+            "iterations": _iterations(picks[0]["cfg"]) if picks else None,
+            "training_iterations": (
+                int(picks[0]["eval"]["presentations"]) * _iterations(picks[0]["cfg"])
+                if picks
+                else None
+            ),
+        },
+    }
+    seed0 = next(r for r in sweeps if int(r["cfg"].seed) == 0)
+
+    def row(item) -> dict:
+        cfg, result = item["cfg"], item["eval"]
+        speed, profile = float(cfg.env.sweep.speed_m), str(cfg.env.sweep.profile)
+        nearest = float(cfg.env.distances.start)
+        return {
+            "speed_m": speed,
+            "iterations": _iterations(cfg),
+            "target_turn_deg": fastest_target_pan_deg(speed, profile, nearest),
+            "eye_mae_deg": float(result["mae"]["greedy"]),
+            "distance_total": float(result["distance"]["by_range"]["total"]),
+            **_online_motion(item["run"]),
+        }
+
+    pairings = {"reference": row(seed0)}
+    for item in _evaluated(pairing):
+        pairings[str(item["cfg"].coder.pairing)] = row(item)
+    speed_rows = sorted(
+        [row(seed0)] + [row(i) for i in _evaluated(speeds)], key=lambda r: r["speed_m"]
+    )
+    stops = [analyse(r["run"]) for r in sweeps]
+    stopping = [
+        {
+            "rule": rows[0]["rule"],
+            "travel_cm": _spread(row["travel_cm"] for row in rows),
+            "total": _spread(row["total"] for row in rows),
+        }
+        for rows in zip(*(s["stopping"] for s in stops))
+    ]
+    readouts = {
+        name: _spread(s["readouts"][name]["total"] for s in stops) for name in stops[0]["readouts"]
+    }
+    return {
+        "runs": [str(r["run"]) for r in sweeps],
+        "recipe_runs": [str(r["run"]) for r in picks],
+        "tracking": tracking,
+        "distance": compared,
+        "pairing": pairings,
+        "speed": speed_rows,
+        "readouts": readouts,
+        "stopping": stopping,
+    }
+
+
+def markdown(report: dict) -> str:
+    out = [
+        "# The continuous sweep against pick-and-place",
+        "",
+        f"Made by `python -m parallax.tools.report.continuous` from {len(report['runs'])} "
+        f"continuous runs and {len(report['recipe_runs'])} recipe runs; held-out photographs, "
+        "the greedy eye; mean ± sd over seeds.",
+        "",
+        "## The eye at the body offsets of L (°)",
+        "",
+        "| l (cm) | continuous sweep | pick-and-place (recipe, before its perturbation) |",
+        "|---|---|---|",
+    ]
+    for label, cell in report["tracking"].items():
+        out.append(
+            f"| {label} | {_text(cell['continuous'], 3)} | {_text(cell['pick_and_place'], 3)} |"
+        )
+    out += [
+        "",
+        "## Distance error (%)",
+        "",
+        "| motion | 3-4.9 m | 5-6.9 m | 7-10 m | total | iterations a presentation | "
+        "training iterations |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, cells in report["distance"].items():
+        values = " | ".join(_text(cells[k]) for k in RANGES)
+        out.append(
+            f"| {name.replace('_', '-')} | {values} | {cells['iterations']} | "
+            f"{cells['training_iterations']} |"
+        )
+    out += [
+        "",
+        "## Which pairing learns to pursue (seed 0)",
+        "",
+        "| pairing | eye (°) | distance total (%) | tracking error in motion (°) | "
+        "retinal slip (° an iteration) |",
+        "|---|---|---|---|---|",
+    ]
+    for name, r in report["pairing"].items():
+        out.append(
+            f"| {name} | {r['eye_mae_deg']:.3f} | {r['distance_total']:.2f} | "
+            f"{r.get('tracking_error_deg', math.nan):.3f} | "
+            f"{r.get('retinal_slip_deg', math.nan):.4f} |"
+        )
+    out += [
+        "",
+        "## Error against body speed (seed 0, about 64,640 training iterations each)",
+        "",
+        "| speed (mm an iteration) | iterations a presentation | target's fastest turn at 3 m "
+        "(°/iteration) | eye (°) | distance total (%) | tracking error in motion (°) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in report["speed"]:
+        out.append(
+            f"| {1000 * r['speed_m']:g} | {r['iterations']} | {r['target_turn_deg']:.3f} | "
+            f"{r['eye_mae_deg']:.3f} | {r['distance_total']:.2f} | "
+            f"{r.get('tracking_error_deg', math.nan):.3f} |"
+        )
+    out += [
+        "",
+        "## What to read from the pursuit: distance error (%) of a network fitted by 5-fold "
+        "cross-validation",
+        "",
+        "| readout | total |",
+        "|---|---|",
+    ]
+    for name, cell in report["readouts"].items():
+        out.append(f"| {name} | {_text(cell)} |")
+    out += [
+        "",
+        "## When to stop moving: error against lateral travel (the planner's estimate)",
+        "",
+        "| stop | lateral travel, out and back (cm) | distance total (%) |",
+        "|---|---|---|",
+    ]
+    for r in report["stopping"]:
+        out.append(f"| {r['rule']} | {_text(r['travel_cm'], 1)} | {_text(r['total'])} |")
+    return "\n".join(out) + "\n"
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.tools.report.continuous", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("runs", type=Path, help="the continuous runs (a sweep folder)")
+    parser.add_argument("--pairing", type=Path, required=True)
+    parser.add_argument("--speeds", type=Path, required=True)
+    parser.add_argument("--recipe", type=Path, required=True)
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--markdown", type=Path, default=None)
+    args = parser.parse_args(argv)
+    for path in (args.json, args.markdown):
+        if path is not None and not (path.parent.is_dir() and os.access(path.parent, os.W_OK)):
+            print(f"continuous: error: cannot write {path}", file=sys.stderr)
+            sys.exit(2)
+    try:
+        report = build(args.runs, args.pairing, args.speeds, args.recipe)
+    except (FileNotFoundError, ValueError, KeyError, StopIteration) as exc:
+        print(f"continuous: error: {exc!r}", file=sys.stderr)
+        sys.exit(2)
+    text = markdown(report)
+    print(text, end="")
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=1, default=str) + "\n")
+    if args.markdown:
+        args.markdown.write_text(text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,66 @@
+"""python -m parallax.tools.report.continuous: its tables from a report, and bad input."""
+
+from __future__ import annotations
+
+import pytest
+
+from parallax.tools.report.continuous import RANGES, _spread, main, markdown
+
+
+def _report():
+    cell = _spread([1.0, 2.0, 3.0])
+    row = {
+        "speed_m": 0.002,
+        "iterations": 101,
+        "target_turn_deg": 0.038,
+        "eye_mae_deg": 0.1,
+        "distance_total": 2.0,
+        "tracking_error_deg": 0.12,
+        "retinal_slip_deg": 0.01,
+    }
+    return {
+        "runs": ["a", "b", "c"],
+        "recipe_runs": ["r"],
+        "tracking": {"5": {"continuous": cell, "pick_and_place": _spread([0.5])}},
+        "distance": {
+            "continuous": {
+                **{k: cell for k in RANGES},
+                "iterations": 101,
+                "training_iterations": 9,
+            },
+            "pick_and_place": {
+                **{k: cell for k in RANGES},
+                "iterations": 480,
+                "training_iterations": 9,
+            },
+        },
+        "pairing": {"reference": row, "consecutive": row},
+        "speed": [row],
+        "readouts": {"pursuit gain": cell},
+        "stopping": [{"rule": "fixed: to 5 cm", "travel_cm": cell, "total": cell}],
+    }
+
+
+def test_the_spread_is_the_mean_and_the_sample_sd():
+    cell = _spread([1.0, 2.0, 3.0])
+    assert (cell["mean"], cell["sd"], cell["n"]) == (2.0, 1.0, 3)
+
+
+def test_the_tables_hold_every_row():
+    text = markdown(_report())
+    assert "| 5 | 2.000 ± 1.000 | 0.500 |" in text
+    assert "| continuous | 2.00 ± 1.00 |" in text and "| 101 | 9 |" in text
+    assert "| consecutive | 0.100 | 2.00 | 0.120 | 0.0100 |" in text
+    assert "| 2 | 101 | 0.038 |" in text
+    assert "| fixed: to 5 cm | 2.0 ± 1.0 | 2.00 ± 1.00 |" in text
+
+
+def test_a_folder_without_runs_is_one_line_and_exit_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(
+            [str(tmp_path), "--pairing", str(tmp_path), "--speeds", str(tmp_path)]
+            + ["--recipe", str(tmp_path), "--markdown", str(tmp_path / "out.md")]
+        )
+    assert stop.value.code == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert not (tmp_path / "out.md").exists()
