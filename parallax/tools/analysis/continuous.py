@@ -36,10 +36,10 @@ from parallax.config import load_run_config
 from parallax.distance.metrics import distance_error_by_range
 from parallax.distance.planner import MovementPlanner
 from parallax.tools.analysis.eye_bound import network_cross_validated
-from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, read_record
+from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, RUN_CONFIG_NAME, read_record
 
 #: Prices of travel (percentage points of expected distance error per cm) for the planned rows.
-PRICES = (0.0, 0.005, 0.01, 0.02, 0.05, 0.1)
+PRICES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
 
 
 def pursuit_gain(pans_deg: np.ndarray, lateral_m: np.ndarray) -> np.ndarray:
@@ -90,8 +90,12 @@ def planned_stop(planner: MovementPlanner, pans: np.ndarray, price_per_cm: float
 
 
 def analyse(eval_dir: Path, prices=PRICES) -> dict:
-    result = json.loads(read_record(Path(eval_dir) / EVAL_NAME))
-    cfg = load_run_config(result["run_dir"])
+    eval_dir = Path(eval_dir)
+    result = json.loads(read_record(eval_dir / EVAL_NAME))
+    # the evaluation lies in its run's folder (parallax-eval's default) or one below it
+    # (--out RUN/NAME); its own run_dir is relative to where parallax-eval ran
+    run_dir = eval_dir if (eval_dir / RUN_CONFIG_NAME).is_file() else eval_dir.parent
+    cfg = load_run_config(run_dir)
     if cfg.env.motion != "continuous":
         raise ValueError(f"{eval_dir}: its run did not sweep (env.motion={cfg.env.motion})")
     distances = np.asarray(result["greedy_samples"]["grid"]["distances"], float)
@@ -110,7 +114,7 @@ def analyse(eval_dir: Path, prices=PRICES) -> dict:
             network_cross_validated(one_number, pursuit_gain(pans, lateral)[:, None], distances)
         ),
     }
-    queue = training_sweeps(Path(result["run_dir"]), int(cfg.distance.queue_size))
+    queue = training_sweeps(run_dir, int(cfg.distance.queue_size))
     planner = MovementPlanner(list(lateral), queue_size=len(queue[1]), price_per_trial=0.0)
     for s, d in zip(*queue):
         planner.observe(s, float(d))
