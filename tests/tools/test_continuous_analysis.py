@@ -48,3 +48,25 @@ def test_a_folder_without_an_evaluation_is_one_line_and_exit_2(tmp_path, capsys)
         main([str(tmp_path)])
     assert stop.value.code == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_an_error_that_follows_the_distance_is_learnable_and_noise_is_not():
+    from parallax.tools.analysis.continuous import eye_error_parts
+    from parallax.tools.analysis.eye_bound import perfect_pans
+
+    distances = np.round(np.arange(30, 101) / 10, 1)
+    perfect = perfect_pans(tuple(LATERAL), tuple(distances))
+    bias = 0.05 + 0.01 * distances[:, None]  # the eye stops short, more so far away
+
+    def result(pans):
+        return {
+            "readout": "last",
+            "greedy_samples": {"grid": {"distances": list(distances)}},
+            "greedy_samples_by_readout": {"last": {"grid": {"pans": pans.tolist()}}},
+        }
+
+    smooth = eye_error_parts(result(perfect - bias), LATERAL)
+    assert smooth["eye_mae_deg"] > 0.1 and smooth["eye_unlearnable_deg"] < 1e-9
+    noise = np.random.default_rng(0).normal(0, 0.05, perfect.shape)
+    noisy = eye_error_parts(result(perfect + noise), LATERAL)
+    assert noisy["eye_unlearnable_deg"] > 0.8 * noisy["eye_mae_deg"] > 0.03

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from parallax.tools.report.continuous import RANGES, _spread, main, markdown
+from parallax.tools.report.continuous import EYE_PARTS, RANGES, _spread, main, markdown
 
 
 def _report():
@@ -24,12 +24,12 @@ def _report():
         "tracking": {"5": {"continuous": cell, "pick_and_place": _spread([0.5])}},
         "distance": {
             "continuous": {
-                **{k: cell for k in RANGES},
+                **{k: cell for k in RANGES + EYE_PARTS},
                 "iterations": 101,
                 "training_iterations": 9,
             },
             "pick_and_place": {
-                **{k: cell for k in RANGES},
+                **{k: cell for k in RANGES + EYE_PARTS},
                 "iterations": 480,
                 "training_iterations": 9,
             },
@@ -49,7 +49,7 @@ def test_the_spread_is_the_mean_and_the_sample_sd():
 def test_the_tables_hold_every_row():
     text = markdown(_report())
     assert "| 5 | 2.000 ± 1.000 | 0.500 |" in text
-    assert "| continuous | 2.00 ± 1.00 |" in text and "| 101 | 9 |" in text
+    assert "| continuous | 2.00 ± 1.00 |" in text and "| 101 | 9 | 2.000 ± 1.000 |" in text
     assert "| consecutive | 0.100 | 2.00 | 0.120 | 0.0100 |" in text
     assert "| 2 | 101 | 0.038 |" in text
     assert "| fixed: to 5 cm | 2.0 ± 1.0 | 2.00 ± 1.00 |" in text

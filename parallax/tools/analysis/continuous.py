@@ -3,8 +3,11 @@
 laterally").
 
 For evaluations (parallax-eval) of runs with ``env.motion=continuous``, on the held-out
-photographs, it prints two tables:
+photographs, it prints the eye's error and two tables:
 
+- **The eye's error, and the part a distance learner cannot undo**: the mean |q_p − α*_p|, and
+  what is left of it once a smooth function of the distance (a cubic in d, position by position)
+  is taken away: a repeatable error the network learns, an unrepeatable one it cannot.
 - **What to read from the pursuit.** The distance error of a fresh distance learner of the run's
   settings, fitted by 5-fold cross-validation to the evaluation's own eye movements, fed either
   s, the pans as the body passes l_1 … l_r (what training uses), or one number, the pursuit gain
@@ -35,7 +38,7 @@ import numpy as np
 from parallax.config import load_run_config
 from parallax.distance.metrics import distance_error_by_range
 from parallax.distance.planner import MovementPlanner
-from parallax.tools.analysis.eye_bound import network_cross_validated
+from parallax.tools.analysis.eye_bound import network_cross_validated, perfect_pans
 from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, RUN_CONFIG_NAME, read_record
 
 #: Prices of travel (percentage points of expected distance error per cm) for the planned rows.
@@ -45,6 +48,20 @@ PRICES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
 def pursuit_gain(pans_deg: np.ndarray, lateral_m: np.ndarray) -> np.ndarray:
     """g = Σ l_p·tan q_p / Σ l_p² per presentation (rows of ``pans_deg``), in 1/m."""
     return np.tan(np.radians(pans_deg)) @ lateral_m / float(lateral_m @ lateral_m)
+
+
+def eye_error_parts(result: dict, lateral_m) -> dict[str, float]:
+    """The eye's mean |q_p − α*_p| over an evaluation's grid presentations, and the part of it a
+    distance learner cannot undo: what is left after a cubic in d, fitted position by position,
+    takes away each position's error as a smooth function of the distance."""
+    distances = np.asarray(result["greedy_samples"]["grid"]["distances"], float)
+    pans = np.asarray(result["greedy_samples_by_readout"][result["readout"]]["grid"]["pans"], float)
+    errors = pans - perfect_pans(tuple(float(l) for l in lateral_m), tuple(distances))
+    left = [e - np.polyval(np.polyfit(distances, e, 3), distances) for e in errors.T]
+    return {
+        "eye_mae_deg": float(np.abs(errors).mean()),
+        "eye_unlearnable_deg": float(np.abs(left).mean()),
+    }
 
 
 def training_sweeps(run_dir: Path, count: int) -> tuple[np.ndarray, np.ndarray]:
@@ -125,7 +142,12 @@ def analyse(eval_dir: Path, prices=PRICES) -> dict:
         stops, estimates = rule(planner, pans, setting)
         travel = 2 * 100 * lateral[stops]  # out and back, as the planner prices it
         rows.append({"rule": label, "travel_cm": float(travel.mean()), **error(estimates)})
-    return {"eval": str(eval_dir), "readouts": readouts, "stopping": rows}
+    return {
+        "eval": str(eval_dir),
+        "eye": eye_error_parts(result, lateral),
+        "readouts": readouts,
+        "stopping": rows,
+    }
 
 
 def _writable(path: Path) -> bool:
@@ -153,7 +175,12 @@ def main(argv: list[str] | None = None) -> None:
         print(f"continuous: error: {exc}", file=sys.stderr)
         sys.exit(2)
     for result in results:
-        print(f"\n{result['eval']}\n\n| readout | 3-4.9 m | 5-6.9 m | 7-10 m | total |")
+        eye = result["eye"]
+        print(
+            f"\n{result['eval']}\n\nthe eye's error {eye['eye_mae_deg']:.3f}°, of which no "
+            f"function of the distance takes away {eye['eye_unlearnable_deg']:.3f}°"
+        )
+        print("\n| readout | 3-4.9 m | 5-6.9 m | 7-10 m | total |")
         print("|---|---|---|---|---|")
         for name, e in result["readouts"].items():
             print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in e.values()) + " |")

@@ -31,10 +31,11 @@ import numpy as np
 
 from parallax.config import load_run_config
 from parallax.envs.sweep import fastest_target_pan_deg, sweep_iterations
-from parallax.tools.analysis.continuous import analyse
+from parallax.tools.analysis.continuous import analyse, eye_error_parts
 from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, read_record, record_file
 
 RANGES = ("3-4.9", "5-6.9", "7-10", "total")
+EYE_PARTS = ("eye_mae_deg", "eye_unlearnable_deg")
 RECIPE = "recipe_multi_5_20_weighted"
 #: The share of a run's last presentations whose online pursuit figures are averaged.
 LAST_SHARE = 0.1
@@ -103,7 +104,14 @@ def build(runs: Path, pairing: Path, speeds: Path, recipe: Path) -> dict:
     }
 
     def distance(items) -> dict:
-        return {k: _spread(r["eval"]["distance"]["by_range"][k] for r in items) for k in RANGES}
+        parts = [
+            eye_error_parts(r["eval"], [float(l) for l in r["cfg"].curriculum.lateral_positions])
+            for r in items
+        ]
+        return {
+            **{k: _spread(r["eval"]["distance"]["by_range"][k] for r in items) for k in RANGES},
+            **{k: _spread(part[k] for part in parts) for k in EYE_PARTS},
+        }
 
     compared = {
         "continuous": {
@@ -189,14 +197,15 @@ def markdown(report: dict) -> str:
         "## Distance error (%)",
         "",
         "| motion | 3-4.9 m | 5-6.9 m | 7-10 m | total | iterations a presentation | "
-        "training iterations |",
-        "|---|---|---|---|---|---|---|",
+        "training iterations | eye (°) | of it, no function of d (°) |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, cells in report["distance"].items():
         values = " | ".join(_text(cells[k]) for k in RANGES)
+        eye = " | ".join(_text(cells[k], 3) for k in EYE_PARTS)
         out.append(
             f"| {name.replace('_', '-')} | {values} | {cells['iterations']} | "
-            f"{cells['training_iterations']} |"
+            f"{cells['training_iterations']} | {eye} |"
         )
     out += [
         "",
