@@ -4,7 +4,6 @@ coder's helper thread, and none of it changes a number."""
 
 from __future__ import annotations
 
-import sys
 import threading
 
 import numpy as np
@@ -27,14 +26,13 @@ def _presentations(overrides: list[str], chunk: int, monkeypatch, count: int = 2
     monkeypatch.setattr(lockstep, "ENCODE_CHUNK", chunk)
     exp = Experiment(compose(overrides))
     slices = []
-    encode = exp.coder.encode
+    encode_frame = exp.coder.encode_frame
 
-    def recording_encode(images, robots=slice(None)):
-        if sys._getframe(1).f_globals["__name__"] == lockstep.__name__:  # I(t), not θ_ref's I0
-            slices.append((robots.start, robots.stop))
-        return encode(images, robots)
+    def recording_encode_frame(images, robots=slice(None)):  # I(t), not θ_ref's I0
+        slices.append((robots.start, robots.stop))
+        return encode_frame(images, robots)
 
-    monkeypatch.setattr(exp.coder, "encode", recording_encode)
+    monkeypatch.setattr(exp.coder, "encode_frame", recording_encode_frame)
     try:
         presentations = [exp.run_presentation() for _ in range(count)]
         return presentations, slices, exp.coder.state_dict(), exp.policy.state_dict()
@@ -292,7 +290,7 @@ class _RecordingCoder:
         self.device = torch.device(device)
         self.calls: list[tuple[int, int]] = []
 
-    def encode(self, images, robots):
+    def encode_frame(self, images, robots):
         from parallax.coding import CoderOutput, Encoding
 
         self.calls.append((robots.start, robots.stop))

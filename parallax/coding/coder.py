@@ -196,7 +196,9 @@ class MultiScaleCoder(nn.Module):
         """Encode the robots' newest images I(t) in the configured pairing: against I0
         (reference), or against each robot's previous image, which I(t) then replaces
         (consecutive; the cache holds I0 after :meth:`set_reference`, so I(−1) is I0)."""
-        return self.encode(images, robots, next_reference=self.pairing == "consecutive")
+        if self.pairing == "consecutive":
+            return self.encode(images, robots, next_reference=True)
+        return self.encode(images, robots)
 
     @torch.no_grad()
     def learn_from(self, encodings: Encoding | Sequence[Encoding]) -> None:
