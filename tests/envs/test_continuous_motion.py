@@ -121,3 +121,25 @@ def test_a_speed_the_eye_cannot_follow_is_refused_with_the_numbers():
 def test_settings_a_sweep_cannot_use_are_refused(override, key):
     with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
         validate(_config(override))
+
+
+def test_a_sweeping_run_logs_the_pursuit_and_reads_every_l_p(tmp_path):
+    import json
+
+    from tests.conftest import train_tiny_run
+
+    train_tiny_run(
+        tmp_path,
+        ["env.motion=continuous", "env.sweep.speed_m=0.01", "train.distance_readout=last"],
+    )
+    lines = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    assert all(line["steps"] == 11 * (i + 1) for i, line in enumerate(lines))  # one 11-step sweep
+    for line in lines:
+        assert np.isfinite(line["pans"]).all() and line["tracking_error_deg"] >= 0
+        assert line["retinal_slip_deg"] >= 0
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(tmp_path / "tb"))
+    events.Reload()
+    tags = set(events.Tags()["scalars"])
+    assert {"motion/tracking_error_deg", "motion/retinal_slip_deg"} <= tags
