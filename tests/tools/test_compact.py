@@ -120,3 +120,18 @@ def test_compact_names_a_path_that_holds_no_run(tmp_path, capsys):
         main([str(tmp_path / "missing")])
     assert exc.value.code == 1
     assert "missing does not exist" in capsys.readouterr().err
+
+
+def test_thinning_keeps_what_the_reports_read_and_drops_the_vectors(tmp_path):
+    from parallax.tools.report.compact import READ_BY_REPORTS
+
+    runs = _runs(tmp_path, np.random.default_rng(0))
+    before = read_metrics(runs[0])
+    assert all(set(line) <= set(READ_BY_REPORTS) for line in before)
+    with_vectors = [{**line, "pans": [[0.1, 0.2]], "lm_loss": 0.5} for line in before]
+    (runs[0] / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in with_vectors))
+    compact([runs[0]], thin=True)
+    assert not (runs[0] / "metrics.jsonl").exists()  # compressed, as without thinning
+    assert read_metrics(runs[0]) == before
+    compact([runs[0]], thin=True)  # a thinned record thins to itself
+    assert read_metrics(runs[0]) == before

@@ -4,6 +4,7 @@ takes in place of the plain file (`parallax.tools.report.runs.read_record`).
 
     python -m parallax.tools.report.compact RUN_OR_MULTIRUN_DIR…   # what reproduce.sh runs
     python -m parallax.tools.report.compact … --format gz          # gzip instead of xz
+    python -m parallax.tools.report.compact … --thin               # and only what the reports read
 
 Only finished runs are compacted (a `summary.json` beside the `config.yaml`): the trainer resumes
 an unfinished run from its plain `metrics.jsonl`. In each, the run's `metrics.jsonl` and the
@@ -13,13 +14,17 @@ the plain file's modification time, so that "is the checkpoint newer than its ev
 before. The output is deterministic (xz has no time stamp; gzip's is 0 and it names no file): the
 same record always compresses to the same bytes. A record already compressed in the other format
 is converted; figures and everything else are left alone (docs/results/runs/.gitignore keeps the
-runs' figures out of git).
+runs' figures out of git). ``--thin`` also keeps, of each line of metrics.jsonl, only the keys in
+READ_BY_REPORTS: what the reports, the figures and the analysis tools read of a run that nothing
+replays (a single position, a speed of the continuous sweep); the eye-movement vectors that
+parallax-replay needs go.
 """
 
 from __future__ import annotations
 
 import argparse
 import gzip
+import json
 import lzma
 import os
 import sys
@@ -38,6 +43,37 @@ from parallax.tools.report.runs import (
 )
 
 FORMATS = {"xz": ".xz", "gz": ".gz"}
+#: The keys of a metrics.jsonl line that the reports (figures, Tables 2–3's curves), the
+#: convergence, time-to-learn and collapse analyses and the continuous sweep's report read.
+READ_BY_REPORTS = (
+    "presentation",
+    "steps",
+    "stage",
+    "perturbed",
+    "mae",
+    "mae_per_position",
+    "mae_recent",
+    "mae_recent_per_position",
+    "distance_error",
+    "policy_critic_scale",
+    "policy_entropy",
+    "policy_actor_norm",
+    "learnt_distance",
+    "tracking_error_deg",
+    "retinal_slip_deg",
+)
+
+
+def thin_metrics(run: Path) -> None:
+    """Rewrites ``run``'s metrics.jsonl (plain) with only the READ_BY_REPORTS keys of each line."""
+    lines = read_record(run / METRICS_NAME).splitlines()
+    kept = [
+        json.dumps({k: v for k, v in json.loads(line).items() if k in READ_BY_REPORTS})
+        for line in lines
+    ]
+    partial = run / (METRICS_NAME + ".tmp")
+    partial.write_text("\n".join(kept) + "\n", encoding="utf-8")
+    partial.replace(run / METRICS_NAME)  # the plain file wins over a compressed one
 
 
 def compress(data: bytes, suffix: str) -> bytes:
@@ -94,17 +130,23 @@ def finished_runs(paths: Iterable[str | Path]) -> list[Path]:
     return runs
 
 
-def compact(paths: Iterable[str | Path], suffix: str = ".xz") -> tuple[int, int, int]:
-    """Compacts every finished run at or below ``paths``; (runs, records compressed now,
-    bytes saved)."""
+def compact(
+    paths: Iterable[str | Path], suffix: str = ".xz", thin: bool = False
+) -> tuple[int, int, int]:
+    """Compacts every finished run at or below ``paths`` (``thin``: its metrics to the keys the
+    reports read); (runs, records compressed now, bytes saved)."""
     runs = finished_runs(paths)
     count = saved = 0
     for run in runs:
+        sizes = {}
+        if thin and record_file(run / METRICS_NAME) is not None:
+            sizes[run / METRICS_NAME] = record_file(run / METRICS_NAME).stat().st_size
+            thin_metrics(run)
         for record in run_records(run):
             before = record_file(record)
             if before is None or before.name.endswith(suffix):
                 continue
-            size = before.stat().st_size
+            size = sizes.get(record, before.stat().st_size)
             after = compact_record(record, suffix)
             count += 1
             saved += size - after.stat().st_size
@@ -117,9 +159,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("paths", nargs="+", metavar="RUN_OR_MULTIRUN_DIR")
     parser.add_argument("--format", choices=sorted(FORMATS), default="xz")
+    parser.add_argument("--thin", action="store_true", help="keep only what the reports read")
     args = parser.parse_args(argv)
     try:
-        runs, count, saved = compact(args.paths, FORMATS[args.format])
+        runs, count, saved = compact(args.paths, FORMATS[args.format], args.thin)
     except (ReportError, OSError) as exc:
         print(f"[compact] error: {exc}", file=sys.stderr)
         raise SystemExit(1) from None
