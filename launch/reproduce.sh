@@ -256,8 +256,13 @@ for family in "${families[@]}"; do
     status=1
     continue
   fi
-  # the records as they are committed: the finished runs' metrics.jsonl and eval.json compressed
+  # the records as they are committed: the finished runs' metrics.jsonl and eval.json compressed,
+  # the single positions' (which nothing replays) thinned to what the reports read
   px_run python -m parallax.tools.report.compact "${sources[@]}" || status=$?
+  singles=("$sweep"/*single_*)
+  if [[ -e "${singles[0]}" ]]; then
+    px_run python -m parallax.tools.report.compact --thin "${singles[@]}" || status=$?
+  fi
   if [[ "$family" == without ]]; then
     px_run python -m parallax.tools.report.leave_one_out "${sources[@]}" \
       "$(px_record_dir recipe)" --out "$report_root" "${notes[@]}" || status=$?
