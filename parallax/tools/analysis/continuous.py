@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -40,6 +39,7 @@ from parallax.distance.metrics import distance_error_by_range
 from parallax.distance.planner import MovementPlanner
 from parallax.tools.analysis.eye_bound import network_cross_validated, perfect_pans
 from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, RUN_CONFIG_NAME, read_record
+from parallax.writable import file_problem
 
 #: Prices of travel (percentage points of expected distance error per cm) for the planned rows.
 PRICES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
@@ -150,11 +150,6 @@ def analyse(eval_dir: Path, prices=PRICES) -> dict:
     }
 
 
-def _writable(path: Path) -> bool:
-    folder = path.parent
-    return folder.is_dir() and not path.is_dir() and os.access(folder, os.W_OK)
-
-
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         prog="python -m parallax.tools.analysis.continuous", description=__doc__.split("\n\n")[0]
@@ -166,8 +161,8 @@ def main(argv: list[str] | None = None) -> None:
     if any(not math.isfinite(p) or p < 0 for p in args.prices):
         print(f"continuous: error: --prices {args.prices}: must be ≥ 0", file=sys.stderr)
         sys.exit(2)
-    if args.json and not _writable(Path(args.json)):
-        print(f"continuous: error: cannot write --json {args.json}", file=sys.stderr)
+    if args.json and (why := file_problem(args.json)):
+        print(f"continuous: error: --json {args.json} {why}", file=sys.stderr)
         sys.exit(2)
     try:
         results = [analyse(Path(folder), args.prices) for folder in args.evals]
@@ -194,7 +189,11 @@ def main(argv: list[str] | None = None) -> None:
                 + " |"
             )
     if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
+        try:
+            Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
+        except OSError as exc:
+            print(f"continuous: error: cannot write --json {args.json}: {exc}", file=sys.stderr)
+            sys.exit(2)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -30,6 +29,7 @@ import numpy as np
 from parallax.distance.metrics import distance_error_by_range
 from parallax.tools.analysis.synthetic_pans import PAPER_DISTANCES_M
 from parallax.tools.report import paper_results as paper
+from parallax.writable import file_problem
 
 RANGES = ("3-4.9", "5-6.9", "7-10", "total")
 NOISE_SHAPES = ("gaussian", "laplace")
@@ -145,18 +145,6 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def unwritable(path: Path) -> str | None:
-    """Why ``path`` cannot be written, checked before anything is computed or written."""
-    parent = path.parent if str(path.parent) else Path(".")
-    if path.is_dir():
-        return "is a folder"
-    if not parent.is_dir():
-        return f"its folder {parent} does not exist"
-    if not os.access(path if path.exists() else parent, os.W_OK):
-        return "is not writable"
-    return None
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m parallax.tools.analysis.paper_floor", description=__doc__.split("\n\n")[0]
@@ -168,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.samples < 1:
         print(f"[paper_floor] --samples must be ≥ 1, got {args.samples}", file=sys.stderr)
         return 2
-    if args.json is not None and (why := unwritable(args.json)):
+    if args.json is not None and (why := file_problem(args.json)):
         print(f"[paper_floor] cannot write --json {args.json}: {why}", file=sys.stderr)
         return 2
     rows = paper_floors(args.samples, args.seed)

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -33,6 +32,7 @@ from parallax.config import load_run_config
 from parallax.envs.sweep import fastest_target_pan_deg, sweep_iterations
 from parallax.tools.analysis.continuous import analyse, eye_error_parts
 from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, read_record, record_file
+from parallax.writable import file_problem
 
 RANGES = ("3-4.9", "5-6.9", "7-10", "total")
 EYE_PARTS = ("eye_mae_deg", "eye_unlearnable_deg")
@@ -269,8 +269,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--markdown", type=Path, default=None)
     args = parser.parse_args(argv)
     for path in (args.json, args.markdown):
-        if path is not None and not (path.parent.is_dir() and os.access(path.parent, os.W_OK)):
-            print(f"continuous: error: cannot write {path}", file=sys.stderr)
+        if path is not None and (why := file_problem(path)):
+            print(f"continuous: error: {path} {why}", file=sys.stderr)
             sys.exit(2)
     try:
         report = build(args.runs, args.pairing, args.speeds, args.recipe)
@@ -279,10 +279,17 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(2)
     text = markdown(report)
     print(text, end="")
-    if args.json:
-        args.json.write_text(json.dumps(report, indent=1, default=str) + "\n")
-    if args.markdown:
-        args.markdown.write_text(text)
+    try:
+        for path, content in (
+            (args.json, json.dumps(report, indent=1, default=str) + "\n"),
+            (args.markdown, text),
+        ):
+            if path is not None:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text(content)
+    except OSError as exc:
+        print(f"continuous: error: cannot write: {exc}", file=sys.stderr)
+        sys.exit(2)
 
 
 if __name__ == "__main__":
