@@ -171,11 +171,10 @@ class ScaleCoder(nn.Module):
         ``next_reference``: the images then become those robots' references (the consecutive
         pairing, (I(t−1), I(t)))."""
         reference, raw = self._reference_and_raw(gray, robots)
-        try:
-            return self._encode_pairs(reference, raw)
-        finally:
-            if next_reference:
-                self.reference[robots] = prepare_reference(raw, self.normalisation)
+        encoded = self._encode_pairs(reference, raw)
+        if next_reference:
+            self.reference[robots] = prepare_reference(raw, self.normalisation)
+        return encoded
 
     def _encode_pairs(
         self, reference: torch.Tensor, raw: torch.Tensor

@@ -31,7 +31,7 @@ from dm_env import specs
 from parallax.config.schema import EnvConfig, PerturbationConfig, default
 from parallax.envs.hoap3 import Physics, check_distance
 from parallax.envs.stimuli import load_stimuli
-from parallax.envs.sweep import body_offsets
+from parallax.envs.sweep import body_offsets, sweep_iterations
 from parallax.geometry import ACTION_SET_DEG
 
 
@@ -147,7 +147,7 @@ class LateralPursuitTask(base.Task):
     def trial_length(self) -> int:
         """Iterations per trial: t_h, or the sweep's T (parallax.envs.sweep)."""
         if self._continuous:
-            return len(self._sweep_offsets(self._pending_positions))
+            return sweep_iterations(self._pending_positions[-1], self._sweep_speed)
         return self._trial_length
 
     def _sweep_offsets(self, lateral_positions: Sequence[float]) -> np.ndarray:
