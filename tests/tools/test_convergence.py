@@ -32,6 +32,7 @@ def test_a_falling_phase_moves_and_a_level_one_is_flat(tmp_path):
     assert found["before"]["presentations"] == 50 and not found["before"]["flat"]
     assert found["before"]["trend"] == pytest.approx(-0.1)  # two blocks of 10, 10 apart
     assert found["after"]["flat"] and found["after"]["mae_recent"] == 0.2
+    assert found["after"]["per_position"] == {"5": 0.2, "10": 0.1}
     assert found["critic_peak"] == 3.0 and found["critic_last"] == 3.0
     curve = found["blocks"]
     assert [b["first"] for b in curve] == [1, 26, 51, 76]
@@ -45,6 +46,10 @@ def test_the_command_prints_a_row_per_run_and_refuses_a_missing_record(tmp_path,
     out = capsys.readouterr().out
     assert f"| {run.name} | 0.300° (flat: +0.000°, 5) |" in out
     assert "mean recent MAE by block" in out
+    assert "by lateral position" not in out
+    convergence.main([str(run), "--positions"])
+    out = capsys.readouterr().out
+    assert f"{run.name}, recent MAE by lateral position, before: 5 cm: 0.300°, 10 cm: 0.150°" in out
     with pytest.raises(SystemExit) as stop:
         convergence.main([str(tmp_path / "missing")])
     assert stop.value.code == 2

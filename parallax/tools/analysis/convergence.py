@@ -3,7 +3,8 @@ whether its critic stayed bounded, read from its logged `metrics.jsonl`.
 
 A run of Tables 2–3 has two phases, before and after §5's perturbation. For each phase it prints
 the recent eye-movement MAE at the phase's end (eq. 16 over metrics.summary_trials trials, the
-tables' "last 100 trials", worst lateral position) and its trend: the mean of that figure over
+tables' "last 100 trials", worst lateral position; with ``--positions`` every position's) and
+its trend: the mean of that figure over
 the phase's last ``--tail`` of presentations less its mean over the ``--tail`` before. A phase
 is flat when the trend is within ±``--flat`` degrees (means over blocks, so that the noise of a
 100-trial figure does not hide a flat end, nor a slow drift pass for one). Then the critic's
@@ -41,6 +42,7 @@ def _phase(records: list[dict], tail: float, flat: float) -> dict | None:
     return {
         "presentations": len(records),
         "mae_recent": worst[-1],
+        "per_position": dict(records[-1]["mae_recent_per_position"]),
         "trend": trend,
         "flat": abs(trend) <= flat,
     }
@@ -67,7 +69,8 @@ def blocks(records: list[dict], size: int) -> list[dict]:
 def convergence(
     run_dir: str | Path, tail: float = TAIL, flat: float = FLAT, block: int | None = None
 ) -> dict:
-    """{"before", "after": {presentations, mae_recent, trend, flat} or None, "critic_peak",
+    """{"before", "after": {presentations, mae_recent, per_position, trend, flat} or None,
+    "critic_peak",
     "critic_last", "entropy_last", and with ``block`` "blocks" (see :func:`blocks`)} for one
     run directory."""
     records = read_metrics(Path(run_dir))
@@ -105,6 +108,11 @@ def main(argv: Sequence[str] | None = None) -> None:
         type=int,
         help="also print the learning curve in blocks of this many presentations",
     )
+    parser.add_argument(
+        "--positions",
+        action="store_true",
+        help="also print every lateral position's figure at the end of each phase",
+    )
     parser.add_argument("--json", help="also write the figures to this file")
     args = parser.parse_args(argv)
     if not 0 < args.tail <= 1:
@@ -139,6 +147,15 @@ def main(argv: Sequence[str] | None = None) -> None:
                 for b in found["blocks"]
             )
             print(f"\n{Path(run).name}, mean recent MAE by block: {curve}")
+    if args.positions:
+        for run, found in results.items():
+            for name in ("before", "after"):
+                if found[name] is not None:
+                    figures = ", ".join(
+                        f"{position} cm: {mae:.3f}°"
+                        for position, mae in found[name]["per_position"].items()
+                    )
+                    print(f"\n{Path(run).name}, recent MAE by lateral position, {name}: {figures}")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
 
