@@ -267,6 +267,7 @@ OPEN_SETTINGS = {
     "projection": {"policy.weight_decay", "policy.actor_projection_radius"},
     "normalised_features": {"policy.feature_norm"},
     "reset_step_learnt": {"policy.learn_reset_step"},
+    "pan_kept": {"env.pan_reset"},
     "plain_lm": {
         "distance.validation_fraction",
         "distance.test_fraction",

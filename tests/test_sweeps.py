@@ -377,12 +377,15 @@ def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
         "+open_setting=projection",
         "+open_setting=normalised_features",
         "+open_setting=reset_step_learnt",
+        "+open_setting=pan_kept",
         "step_sizes=origin",
         "step_sizes=chong",
         "step_sizes=lukas",
     ]
     for line in sweeps:
-        assert "experiment=sensitivity_single_5\\,sensitivity_multi_5_10" in line
+        both = "sensitivity_single_5\\,sensitivity_multi_5_10"
+        setups = "sensitivity_multi_5_10" if "pan_kept" in line else both
+        assert f"experiment={setups} " in line
         assert "seed=0\\,1\\,2" in line and line.rstrip().endswith("train.presentations=7")
     (replay,) = [l for l in lines if l.startswith("parallax-replay ")]
     assert replay.rstrip().endswith("open_setting=plain_lm")

@@ -36,6 +36,7 @@ ROWS = {
     "projection": ["+open_setting=projection"],
     "normalised features": ["+open_setting=normalised_features"],
     "reset step learnt": ["+open_setting=reset_step_learnt"],
+    "pan kept": ["+open_setting=pan_kept"],
     "step sizes origin": ["step_sizes=origin"],
     "step sizes Chong": ["step_sizes=chong"],
     "step sizes Lukas": ["step_sizes=lukas"],
