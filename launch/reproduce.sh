@@ -286,12 +286,17 @@ if (( ${#eval_dirs[@]} )); then
     --json "$report_root/eye_bound.json" || status=$?
 fi
 
-# the three columns: the paper's numbers, the paper's algorithm with its open settings chosen by
-# us (unsourced), ours
-if [[ -f "$report_root/unsourced.json" && -f "$report_root/recipe.json" ]] || [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
+# the three columns: the paper's numbers, the paper's algorithm (the paper family, its open
+# settings from its lineage, once reported; else the unsourced family, those settings ours), ours
+middle=unsourced
+if [[ -f "$report_root/paper.json" ]] || [[ -n "${PARALLAX_DRY_RUN:-}" && " ${families[*]} " == *" paper "* ]]; then
+  middle=paper
+fi
+if [[ -f "$report_root/$middle.json" && -f "$report_root/recipe.json" ]] || [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
   notes=()
   [[ -f "$report_root/notes.md" ]] && notes=(--notes "$report_root/notes.md")
-  px_run python -m parallax.tools.report.compare "$report_root/unsourced.json" \
-    "$report_root/recipe.json" --out "$report_root" --readme README.md "${notes[@]}" || status=$?
+  px_run python -m parallax.tools.report.compare "$report_root/$middle.json" \
+    "$report_root/recipe.json" --middle "$middle" --out "$report_root" --readme README.md \
+    "${notes[@]}" || status=$?
 fi
 exit "$status"

@@ -287,6 +287,8 @@ def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_fil
     assert any(s.startswith("env.stimuli.dir=") for s in settings)
     assert all(args.robots == 16 and args.greedy_only for args in parsed)
     assert lines[-1].startswith("python -m parallax.tools.report.compare ")
+    # the middle column is the paper family's, its open settings from its lineage
+    assert "/paper.json " in lines[-1] and "--middle paper" in lines[-1]
     assert any(l.startswith("python -m parallax.tools.report.leave_one_out ") for l in lines)
 
 

@@ -1,5 +1,5 @@
-"""The three-column tables: the paper's number, the paper's algorithm with its open settings
-chosen by us (the unsourced family), ours."""
+"""The three-column tables: the paper's number, the paper's algorithm (the unsourced family, its
+open settings chosen by us, or the paper family, those settings from its lineage), ours."""
 
 from __future__ import annotations
 
@@ -120,4 +120,24 @@ def test_the_readme_table_says_what_is_not_run_yet(tmp_path):
     assert (
         "| Table 5: after it, 5-20 cm with weighting | 1.30 % | not yet run | 0.50 ± 0.01 % (n=3) |"
         in text
+    )
+
+
+def test_the_middle_column_can_be_the_paper_family(tmp_path):
+    from parallax.tools.report.compare import readme_table
+
+    (tmp_path / "paper.json").write_text(json.dumps(_family(0.2, 12.0, [])))
+    (tmp_path / "recipe.json").write_text(json.dumps(_family(0.1, 0.5, [])))
+    text, data = compare(tmp_path / "paper.json", tmp_path / "recipe.json", middle="paper")
+    assert text.startswith("# The paper, the paper's algorithm with its open settings from its")
+    assert "`experiment=paper_<setup>`" in text and "unsourced family" in text
+    assert data["table2"][paper.SINGLE]["5"]["paper_family"]["mean"] == 0.2
+    assert all(w.startswith("paper_family, ") for w in data["worse_than_paper"])
+    table = readme_table(data)
+    assert (
+        "| paper's algorithm, open settings from its lineage (paper_*) | ours (recipe) |" in table
+    )
+    assert (
+        "| Table 4: distance error, 5-10 cm without weighting | 4.33 % | 12.00 ± 0.01 % (n=3) |"
+        in (table)
     )

@@ -1,10 +1,13 @@
-"""The paper's Tables 2–5 in three columns: the published number, the paper's algorithm with the
-settings it leaves open chosen by us, run in parallax (``experiment=unsourced_<setup>``), and ours
+"""The paper's Tables 2–5 in three columns: the published number, the paper's algorithm run in
+parallax — with the settings it leaves open chosen by us (``experiment=unsourced_<setup>``), or
+taken from the code it builds on (``experiment=paper_<setup>``, ``--middle paper``) — and ours
 (``experiment=recipe_<setup>``); and, for every 5–20 cm model, the evaluations a sceptic would ask
 for.
 
     python -m parallax.tools.report.compare docs/results/unsourced.json docs/results/recipe.json
         --out docs/results
+    python -m parallax.tools.report.compare docs/results/paper.json docs/results/recipe.json
+        --middle paper --out docs/results
 
 It reads the JSON that `parallax-report --tables paper` wrote for each family (launch/
 reproduce.sh makes both), so the three columns come from the same numbers as the two families'
@@ -18,6 +21,7 @@ import json
 import sys
 from collections import Counter
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from parallax.tools.report import paper_results as paper
@@ -25,11 +29,46 @@ from parallax.tools.report.groups import Stat, json_ready
 from parallax.tools.report.runs import ReportError, total_error
 from parallax.tools.report.tables import md_table
 
-#: The columns beside the paper's: the unsourced family (the paper's algorithm, its open settings
-#: chosen by us) and the recipe.
-FAMILIES = ("unsourced", "ours")
-#: Their headers in the README's table.
-README_HEADERS = ("paper's algorithm, open settings ours (unsourced_*)", "ours (recipe)")
+
+@dataclass(frozen=True)
+class Middle:
+    """A family of the paper's algorithm, the column between the paper's and ours."""
+
+    #: its name in the tables and the JSON
+    key: str
+    #: its header in the README's table
+    header: str
+    #: what it is, for the report's first paragraph
+    what: str
+    #: the title's words for it
+    title: str
+    #: the report's sentence on the other family of the paper's algorithm
+    other: str
+
+
+#: ``--middle``: the family of the paper's algorithm shown beside the paper and ours.
+MIDDLES = {
+    "unsourced": Middle(
+        key="unsourced",
+        header="paper's algorithm, open settings ours (unsourced_*)",
+        what="the unsourced family: the paper's algorithm with the settings it leaves open chosen "
+        "by us, `experiment=unsourced_<setup>`",
+        title="the paper's algorithm with its open settings chosen by us",
+        other="The paper family (`experiment=paper_<setup>`, those settings taken from the code "
+        "the paper builds on) is not part of this report.",
+    ),
+    "paper": Middle(
+        key="paper_family",
+        header="paper's algorithm, open settings from its lineage (paper_*)",
+        what="the paper family: the paper's algorithm with the settings it leaves open taken "
+        "from the code it builds on, `experiment=paper_<setup>`",
+        title="the paper's algorithm with its open settings from its lineage",
+        other="The unsourced family (`experiment=unsourced_<setup>`, those settings chosen by "
+        "us) is not part of this report.",
+    ),
+}
+#: The recipe's column and its header in the README's table.
+OURS, OURS_HEADER = "ours", "ours (recipe)"
 TEXTURES_PHOTOGRAPHS = "held-out photographs"
 
 
@@ -235,8 +274,10 @@ def _published_range(table: dict, column: str) -> str:
 
 def readme_table(data: dict) -> str:
     """The README's summary: Tables 2–3 as ranges over the lateral positions, Tables 4–5's
-    totals; the paper, the paper's algorithm with its open settings chosen by us, ours."""
-    header = ["", "paper (published)", *README_HEADERS]
+    totals; the paper, the paper's algorithm (``data["middle"]``'s family), ours."""
+    middle = MIDDLES[data["middle"]]
+    families = (middle.key, OURS)
+    header = ["", "paper (published)", middle.header, OURS_HEADER]
     rows = []
     for key, table, what in (
         ("table2", paper.TABLE2, "Table 2: eye error"),
@@ -253,7 +294,7 @@ def readme_table(data: dict) -> str:
         ):
             rows.append(
                 [f"{what}, {name}", _published_range(table, column)]
-                + [_eye_range(data[key], column, f) for f in FAMILIES]
+                + [_eye_range(data[key], column, f) for f in families]
             )
     for key, what in (("table4", "Table 4: distance error"), ("table5", "Table 5: after it")):
         for row_name, cells in data[key].items():
@@ -264,7 +305,7 @@ def readme_table(data: dict) -> str:
                     "not yet run"
                     if not total[f]["n"]
                     else f"{_stat(total[f]).text()} % (n={total[f]['n']})"
-                    for f in FAMILIES
+                    for f in families
                 ]
             )
     return md_table(header, rows)
@@ -285,10 +326,15 @@ def readme_block(readme: Path) -> str:
     return text.split(README_BEGIN, 1)[1].split(README_END, 1)[0].strip()
 
 
-def compare(unsourced_json: str | Path | None, ours_json: str | Path) -> tuple[str, dict]:
-    # the unsourced family, not run: an empty column
-    unsourced = _load(unsourced_json) if unsourced_json is not None else _NOT_RUN
-    families = dict(zip(FAMILIES, (unsourced, _load(ours_json)), strict=True))
+def compare(
+    middle_json: str | Path | None, ours_json: str | Path, middle: str = "unsourced"
+) -> tuple[str, dict]:
+    """The report and its data: ``middle_json`` is parallax-report's JSON of the family
+    ``middle`` (a key of MIDDLES; None: not run, an empty column), ``ours_json`` the recipe's."""
+    family = MIDDLES[middle]
+    shown = _load(middle_json) if middle_json is not None else _NOT_RUN
+    families = {family.key: shown, OURS: _load(ours_json)}
+    stem = Path(middle_json or f"{middle}.json").stem
     # the leave-one-out report (launch/reproduce.sh without) sits beside the families' JSON
     leave_one_out = (
         "what each improvement buys is in [leave_one_out.md](leave_one_out.md)."
@@ -296,25 +342,19 @@ def compare(unsourced_json: str | Path | None, ours_json: str | Path) -> tuple[s
         else "what each improvement buys (`bash launch/reproduce.sh without`) is not yet made."
     )
     md = [
-        "# The paper, the paper's algorithm with its open settings chosen by us, and ours: "
-        "Tables 2–5",
+        f"# The paper, {family.title}, and ours: Tables 2–5",
         "",
         "Made by `python -m parallax.tools.report.compare` from "
-        f"{f'`{unsourced_json}`' if unsourced_json else 'nothing'} (the unsourced family: the "
-        "paper's algorithm with the settings it leaves open chosen by us, "
-        "`experiment=unsourced_<setup>`) and "
+        f"{f'`{middle_json}`' if middle_json else 'nothing'} ({family.what}) and "
         f"`{ours_json}` (our recipe, `experiment=recipe_<setup>`), which `parallax-report` "
-        "wrote from the runs of `bash launch/reproduce.sh`. The paper family "
-        "(`experiment=paper_<setup>`, those settings taken from the code the paper builds on) "
-        "is not part of this report. Cells: mean ± sd over seeds (n seeds); the paper's "
-        "published number beside them. Each family's own report, with every run, its figures "
-        "in the manner of Figs. 7–11 and its failed jobs, is the Markdown beside its JSON "
-        f"([{Path(unsourced_json or 'unsourced.json').stem}.md]"
-        f"({Path(unsourced_json or 'unsourced.json').stem}.md), [{Path(ours_json).stem}.md]"
+        f"wrote from the runs of `bash launch/reproduce.sh`. {family.other} Cells: mean ± sd "
+        "over seeds (n seeds); the paper's published number beside them. Each family's own "
+        "report, with every run, its figures in the manner of Figs. 7–11 and its failed jobs, "
+        f"is the Markdown beside its JSON ([{stem}.md]({stem}.md), [{Path(ours_json).stem}.md]"
         f"({Path(ours_json).stem}.md)); {leave_one_out}",
         "",
     ]
-    data: dict = {"inputs": [str(unsourced_json), str(ours_json)]}
+    data: dict = {"inputs": [str(middle_json), str(ours_json)], "middle": middle}
     worse_all: list[str] = []
     worse_md: list[str] = []
     for key, number, what, table in (
@@ -367,9 +407,16 @@ def main(argv: list[str] | None = None) -> None:
         prog="python -m parallax.tools.report.compare", description=__doc__.split("\n\n")[0]
     )
     parser.add_argument(
-        "unsourced_json", help="parallax-report's JSON of the unsourced family ('-': not run)"
+        "middle_json",
+        help="parallax-report's JSON of the family of the paper's algorithm ('-': not run)",
     )
     parser.add_argument("ours_json", help="parallax-report's JSON of the recipe family")
+    parser.add_argument(
+        "--middle",
+        choices=sorted(MIDDLES),
+        default="unsourced",
+        help="which family of the paper's algorithm middle_json holds",
+    )
     parser.add_argument("--out", default=None, help="folder for the Markdown and compare.json")
     parser.add_argument("--name", default="README.md", help="file name of the Markdown")
     parser.add_argument("--notes", default=None, help="a Markdown file put under the title")
@@ -381,7 +428,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     try:
         text, data = compare(
-            None if args.unsourced_json == "-" else args.unsourced_json, args.ours_json
+            None if args.middle_json == "-" else args.middle_json, args.ours_json, args.middle
         )
         if args.readme is not None:
             readme = Path(args.readme)
