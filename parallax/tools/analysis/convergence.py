@@ -4,13 +4,12 @@ whether its critic stayed bounded, read from its logged `metrics.jsonl`.
 A run of Tables 2–3 has two phases, before and after §5's perturbation. For each phase it prints
 the recent eye-movement MAE at the phase's end (eq. 16 over metrics.summary_trials trials, the
 tables' "last 100 trials", worst lateral position; with ``--positions`` every position's) and
-its trend: the mean of that figure over
-the phase's last ``--tail`` of presentations less its mean over the ``--tail`` before. A phase
-is flat when the trend is within ±``--flat`` degrees (means over blocks, so that the noise of a
-100-trial figure does not hide a flat end, nor a slow drift pass for one). Then the critic's
-scale, mean |v·φ| (peak and last; it grows without bound when the natural actor-critic
-diverges, paper §3.4) and the policy's entropy at the end (ln 7 ≈ 1.95 is uniform over the
-seven pan steps).
+its trend: the mean of that figure over the phase's last ``--tail`` of presentations less its
+mean over the ``--tail`` before. A phase is flat when the trend is within ±``--flat`` degrees
+(means over blocks, so that the noise of a 100-trial figure does not hide a flat end, nor a slow
+drift pass for one). Then the critic's scale, mean |v·φ| (peak and last; it grows without bound
+when the natural actor-critic diverges, paper §3.4) and the policy's entropy at the end
+(ln 7 ≈ 1.95 is uniform over the seven pan steps).
 """
 
 from __future__ import annotations
@@ -70,9 +69,8 @@ def convergence(
     run_dir: str | Path, tail: float = TAIL, flat: float = FLAT, block: int | None = None
 ) -> dict:
     """{"before", "after": {presentations, mae_recent, per_position, trend, flat} or None,
-    "critic_peak",
-    "critic_last", "entropy_last", and with ``block`` "blocks" (see :func:`blocks`)} for one
-    run directory."""
+    "critic_peak", "critic_last", "entropy_last", and with ``block`` "blocks" (see
+    :func:`blocks`)} for one run directory."""
     records = read_metrics(Path(run_dir))
     if not records:
         raise ValueError(f"{run_dir}: metrics.jsonl holds no presentations")

@@ -139,8 +139,9 @@ def compact(
     count = saved = 0
     for run in runs:
         sizes = {}
-        if thin and record_file(run / METRICS_NAME) is not None:
-            sizes[run / METRICS_NAME] = record_file(run / METRICS_NAME).stat().st_size
+        metrics = record_file(run / METRICS_NAME)
+        if thin and metrics is not None:
+            sizes[run / METRICS_NAME] = metrics.stat().st_size
             thin_metrics(run)
         for record in run_records(run):
             before = record_file(record)
