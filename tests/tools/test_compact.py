@@ -132,6 +132,24 @@ def test_thinning_keeps_what_the_reports_read_and_drops_the_vectors(tmp_path):
     (runs[0] / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in with_vectors))
     compact([runs[0]], thin=True)
     assert not (runs[0] / "metrics.jsonl").exists()  # compressed, as without thinning
-    assert read_metrics(runs[0]) == before
+    thinned = read_metrics(runs[0])
+    assert [line.keys() for line in thinned] == [line.keys() for line in before]
+    assert thinned != before  # the random figures had 17 digits
+    for kept, line in zip(thinned, before, strict=True):
+        assert kept["mae"] == pytest.approx(line["mae"], rel=5e-7)
+        assert len(repr(kept["mae"]).lstrip("0.").replace(".", "")) <= 7
     compact([runs[0]], thin=True)  # a thinned record thins to itself
-    assert read_metrics(runs[0]) == before
+    assert read_metrics(runs[0]) == thinned
+
+
+def test_rounding_reaches_the_numbers_inside_lists_and_dicts():
+    from parallax.tools.report.compact import rounded
+
+    value = {"a": [1 / 3, {"b": 2 / 3}], "n": 7, "flag": True, "name": "x", "none": None}
+    assert rounded(value) == {
+        "a": [0.3333333, {"b": 0.6666667}],
+        "n": 7,
+        "flag": True,
+        "name": "x",
+        "none": None,
+    }

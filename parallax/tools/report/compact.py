@@ -17,7 +17,8 @@ is converted; figures and everything else are left alone (docs/results/runs/.git
 runs' figures out of git). ``--thin`` also keeps, of each line of metrics.jsonl, only the keys in
 READ_BY_REPORTS: what the reports, the figures and the analysis tools read of a run that nothing
 replays (a single position, a speed of the continuous sweep); the eye-movement vectors that
-parallax-replay needs go.
+parallax-replay needs go, and each number is kept to SIGNIFICANT_DIGITS, which halves what is
+left (the reports print three or four).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import os
 import sys
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 from parallax.tools.report.runs import (
     COMPRESSED,
@@ -63,12 +65,28 @@ READ_BY_REPORTS = (
     "retinal_slip_deg",
 )
 
+#: Digits a thinned record keeps of each number: the reports print three or four, so a relative
+#: change of at most 5e-7 moves none of them (the 17 a float64 prints double the file).
+SIGNIFICANT_DIGITS = 7
+
+
+def rounded(value: Any) -> Any:
+    """``value`` with every float in it (through lists and dicts) kept to SIGNIFICANT_DIGITS."""
+    if isinstance(value, float):
+        return float(f"{value:.{SIGNIFICANT_DIGITS}g}")
+    if isinstance(value, list):
+        return [rounded(item) for item in value]
+    if isinstance(value, dict):
+        return {key: rounded(item) for key, item in value.items()}
+    return value
+
 
 def thin_metrics(run: Path) -> None:
-    """Rewrites ``run``'s metrics.jsonl (plain) with only the READ_BY_REPORTS keys of each line."""
+    """Rewrites ``run``'s metrics.jsonl (plain) with only the READ_BY_REPORTS keys of each line,
+    each number rounded to SIGNIFICANT_DIGITS."""
     lines = read_record(run / METRICS_NAME).splitlines()
     kept = [
-        json.dumps({k: v for k, v in json.loads(line).items() if k in READ_BY_REPORTS})
+        json.dumps({k: rounded(v) for k, v in json.loads(line).items() if k in READ_BY_REPORTS})
         for line in lines
     ]
     partial = run / (METRICS_NAME + ".tmp")
