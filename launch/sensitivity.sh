@@ -3,9 +3,10 @@
 # experiment=sensitivity_single_5 and sensitivity_multi_5_10 (the paper's set-ups in shorter
 # runs) for every seed, with the lineage's settings and with one switch each: a file of
 # conf/open_setting/ that changes the eye (+open_setting=NAME; pan_kept on 5–10 cm only, as it
-# changes nothing at a single position) or another of the AEC code's step-size sets
-# (step_sizes=NAME); the switch that changes the distance learner only
-# (open_setting=plain_lm) by parallax-replay of the lineage's runs; then the table,
+# changes nothing at a single position), another of the AEC code's step-size sets
+# (step_sizes=NAME) or another of the dictionary rates η those sets carry (dictionary_rate=NAME);
+# the switch that changes the distance learner only (open_setting=plain_lm) by parallax-replay of
+# the lineage's runs; then the table,
 # docs/results/sensitivity.md and .json. Resumable (fixed folders, like launch/reproduce.sh).
 # Arguments with '=' are Hydra overrides for every run; the table is told of them.
 #     bash launch/sensitivity.sh
@@ -27,6 +28,9 @@ px_sweep "$sweep" "experiment=sensitivity_multi_5_10" "+open_setting=pan_kept" "
 for set in origin chong lukas; do
   px_sweep "$sweep" "$setups" "step_sizes=$set" "$seeds" "$@" || status=$?
 done
+for rate in origin lukas alex_p; do
+  px_sweep "$sweep" "$setups" "dictionary_rate=$rate" "$seeds" "$@" || status=$?
+done
 # the lineage's runs: those launched with neither switch
 lineage=()
 if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
@@ -34,7 +38,7 @@ if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
 else
   for overrides in "$sweep"/*/.hydra/overrides.yaml; do
     [[ -f "$overrides" ]] || continue
-    if ! grep -qE -- '^- (\+open_setting|step_sizes)=' "$overrides"; then
+    if ! grep -qE -- '^- (\+open_setting|step_sizes|dictionary_rate)=' "$overrides"; then
       lineage+=("$(dirname "$(dirname "$overrides")")")
     fi
   done

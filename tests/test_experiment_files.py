@@ -25,6 +25,7 @@ SETUPS = [
 ]
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "docs" / "results" / "checkpoints"
 STEP_SIZES = Path(__file__).resolve().parents[1] / "conf" / "step_sizes"
+DICTIONARY_RATES = STEP_SIZES.parent / "dictionary_rate"
 #: The body sweeping L, compared with the recipe before its perturbation: it has none.
 CONTINUOUS = "continuous_multi_5_20_weighted"
 #: The families over the paper's set-ups, each <family>_<setup>.yaml for every set-up.
@@ -147,10 +148,13 @@ def test_the_paper_family_uses_nothing_beyond_the_paper_and_its_lineage(setup):
     assert flat["distance.max_fail"] == 6
     assert flat["distance.epochs_per_call"] == 1000
     assert flat["distance.reset_mu"] is True
-    # the step sizes are one of the active-efficient-coding code's sets
-    steps = ("policy.critic_lr", "policy.advantage_lr", "policy.actor_lr", "coder.learning_rate")
+    # the step sizes are one of the active-efficient-coding code's sets, and η one of the values
+    # those sets carry
+    steps = ("policy.critic_lr", "policy.advantage_lr", "policy.actor_lr")
     sets = [flatten(OmegaConf.to_container(OmegaConf.load(p))) for p in STEP_SIZES.glob("*.yaml")]
     assert any(all(flat[key] == s[key] for key in steps) for s in sets)
+    rates = [OmegaConf.load(p).coder.learning_rate for p in DICTIONARY_RATES.glob("*.yaml")]
+    assert flat["coder.learning_rate"] in rates and len(rates) == len(sets)
 
 
 @pytest.mark.parametrize("setup", SETUPS)

@@ -370,7 +370,14 @@ def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
     lines = _dry_run("sensitivity.sh", tmp_path, "train.presentations=7")
     sweeps = [l for l in lines if l.startswith("parallax-train -m ")]
     switches = [
-        next((w for w in l.split() if w.startswith(("+open_setting=", "step_sizes="))), None)
+        next(
+            (
+                w
+                for w in l.split()
+                if w.startswith(("+open_setting=", "step_sizes=", "dictionary_rate="))
+            ),
+            None,
+        )
         for l in sweeps
     ]
     assert switches == [
@@ -383,6 +390,9 @@ def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
         "step_sizes=origin",
         "step_sizes=chong",
         "step_sizes=lukas",
+        "dictionary_rate=origin",
+        "dictionary_rate=lukas",
+        "dictionary_rate=alex_p",
     ]
     for line in sweeps:
         both = "sensitivity_single_5\\,sensitivity_multi_5_10"

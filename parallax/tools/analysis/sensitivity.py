@@ -2,8 +2,9 @@
 on — its eye and distance errors with each open setting switched away from its lineage's value.
 
 The runs are those of ``experiment=sensitivity_<setup>`` (paper_<setup> in a shorter run), each
-with at most one switch: an open setting of ``conf/open_setting/`` (``+open_setting=xi_1``), or
-another of the lineage's step-size sets (``step_sizes=chong``); ``parallax-replay`` of the
+with at most one switch: an open setting of ``conf/open_setting/`` (``+open_setting=xi_1``),
+another of the lineage's step-size sets (``step_sizes=chong``) or another of its dictionary
+rates η (``dictionary_rate=alex_p``); ``parallax-replay`` of the
 lineage's runs gives the rows that change the distance learner only (``plain_lm``). A run
 belongs to the row whose composed config it equals, its seed and the settings that change no
 result aside, so that a run of other settings is never counted in a row.
@@ -40,6 +41,9 @@ ROWS = {
     "step sizes origin": ["step_sizes=origin"],
     "step sizes Chong": ["step_sizes=chong"],
     "step sizes Lukas": ["step_sizes=lukas"],
+    "η origin (0.01)": ["dictionary_rate=origin"],
+    "η Lukas (0.1)": ["dictionary_rate=lukas"],
+    "η Alex P (0.5)": ["dictionary_rate=alex_p"],
     "plain LM (replay)": ["+open_setting=plain_lm"],
 }
 #: Settings a run's row does not depend on: its seed, those filled at run time, and those that
