@@ -9,8 +9,10 @@ beyond the paper, at distances between the grid points — and we measure:
 - the distance error per range 3–4.9, 5–6.9, 7–10 m and total (Tables 4–5), from s of the
   greedy policy.
 
-Trials start as the run's last training presentations did (pan 0 as in the paper, or a random
-pan with ``env.initial_pan_jitter_deg``); ``--start-jitter on|off`` chooses.
+``--split train`` shows the photographs the eye learnt on instead, to tell how much of the
+held-out error is the eye's generalisation. Trials start as the run's last training
+presentations did (pan 0 as in the paper, or a random pan with ``env.initial_pan_jitter_deg``);
+``--start-jitter on|off`` chooses.
 
 Writes `eval.json` and figures (`eval_mae_per_position.png`, `eval_error_vs_distance.png`,
 `mae_curves.png`) into the run directory (or --out).
@@ -40,6 +42,7 @@ from parallax.config import (
     validate_stimuli,
 )
 from parallax.distance_step import distance_step
+from parallax.envs.stimuli import SPLITS
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
 from parallax.movement import planned_route
@@ -181,6 +184,7 @@ def evaluate(
     robots: int | None = None,
     stimuli: Sequence[str] = (),
     sampled: bool = True,
+    split: str = "heldout",
 ) -> dict:
     """Frozen measurements of the checkpoint ``checkpoint_name`` of ``run_dir`` (module
     docstring). ``robots``: how many frozen robots run the trials in lockstep (default: the
@@ -188,12 +192,16 @@ def evaluate(
     and the distance errors made from them, do not depend on it; the sampled policy's draws, and
     jittered start pans, come in another order. Robots that the run did not train start their
     worlds' random streams from the run's seed. ``stimuli``: ``env.stimuli.KEY=VALUE`` settings
-    for the held-out textures (e.g. ``env.stimuli.source=procedural``), whose split stays
-    held-out. ``sampled``: also run every trial with the sampled policy (its MAE only)."""
+    for the held-out textures (e.g. ``env.stimuli.source=procedural``). ``sampled``: also run
+    every trial with the sampled policy (its MAE only). ``split``: the textures' split, heldout
+    (the paper's measure on unseen photographs) or train (the photographs the eye learnt on, to
+    tell the eye's generalisation from its learning)."""
     if robots is not None and robots < 1:
         raise ValueError(f"--robots must be at least 1, got {robots}")
     if start_jitter not in ("auto", "on", "off"):
         raise ValueError(f"--start-jitter must be auto, on or off, got {start_jitter!r}")
+    if split not in SPLITS:
+        raise ValueError(f"--split must be one of {', '.join(SPLITS)}, got {split!r}")
     if readout is not None and readout not in DISTANCE_READOUTS:
         raise ValueError(
             f"--readout must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}"
@@ -231,7 +239,7 @@ def evaluate(
         if not sep or not key.startswith(STIMULI_PREFIX) or key == f"{STIMULI_PREFIX}split":
             raise ValueError(
                 f"{item!r}: only {STIMULI_PREFIX}KEY=VALUE settings of the held-out textures may "
-                "be given (not the split)"
+                "be given (the split: --split)"
             )
         if key[len(STIMULI_PREFIX) :] not in cfg.env.stimuli:
             raise ValueError(f"{item!r}: {key} is not a stimulus setting")
@@ -248,7 +256,7 @@ def evaluate(
             f"env.robots={trained_robots}"
         )
     cfg.env.robots = robots
-    exp = Experiment(cfg, stimuli_split="heldout")
+    exp = Experiment(cfg, stimuli_split=split)
     try:
         learnt = state["experiment"]
         if robots != trained_robots:
@@ -305,7 +313,7 @@ def evaluate(
             "robots": robots,
             "stimuli": {
                 **OmegaConf.to_container(cfg.env.stimuli, resolve=True),
-                "split": "heldout",
+                "split": split,
             },
             "stimuli_overrides": list(stimuli),
             "lateral_positions_cm": labels,
@@ -523,6 +531,12 @@ def build_parser() -> argparse.ArgumentParser:
         "eye and the distance errors do not depend on it (default: the run's env.robots)",
     )
     parser.add_argument(
+        "--split",
+        choices=SPLITS,
+        default="heldout",
+        help="the photographs: heldout (default), or train, those the eye learnt on",
+    )
+    parser.add_argument(
         "--greedy-only",
         action="store_true",
         help="leave out the sampled policy's trials (half the time; no sampled MAE)",
@@ -548,6 +562,7 @@ def main(argv: list[str] | None = None) -> None:
             robots=args.robots,
             stimuli=args.stimuli,
             sampled=not args.greedy_only,
+            split=args.split,
         )
     except (FileNotFoundError, ValueError) as exc:
         print(f"parallax-eval: error: {exc}", file=sys.stderr)

@@ -1,4 +1,4 @@
-"""parallax-eval on textures of another kind than the training photographs."""
+"""parallax-eval on textures of another kind than the training photographs, and on those."""
 
 from __future__ import annotations
 
@@ -42,10 +42,22 @@ def test_held_out_textures_of_another_kind(tiny_run, tmp_path):
     assert len(mine["greedy_samples"]["grid"]["pans"]) == 2
 
 
+def test_the_training_photographs_on_request(tiny_run, tmp_path):
+    common = {"distances": [4.0, 6.0], "between": [], "start_jitter": "off", "sampled": False}
+    held_out = evaluate(tiny_run, out=tmp_path / "held_out", **common)
+    seen = evaluate(tiny_run, out=tmp_path / "seen", split="train", **common)
+    assert held_out["stimuli"]["split"] == "heldout" and seen["stimuli"]["split"] == "train"
+    # other photographs: other images, so other pans
+    assert seen["greedy_samples"]["grid"]["pans"] != held_out["greedy_samples"]["grid"]["pans"]
+    with pytest.raises(ValueError, match="--split"):
+        evaluate(tiny_run, out=tmp_path / "none", split="test", **common)
+    assert not (tmp_path / "none").exists()
+
+
 @pytest.mark.parametrize(
     "item, named",
     [
-        ("env.stimuli.split=train", "env.stimuli.split=train"),
+        ("env.stimuli.split=train", "--split"),
         ("env.stimuli.colour=red", "env.stimuli.colour"),
         ("policy.actor_lr=1", "policy.actor_lr=1"),
         ("env.stimuli.kind=plaid", "env.stimuli.kind=plaid"),
