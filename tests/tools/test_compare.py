@@ -73,6 +73,12 @@ def test_three_columns_and_the_cells_worse_than_the_paper(tmp_path):
         "2.69 % (3.35×)" in "\n".join(worse)
     )
     assert f"unsourced, Table 2, {paper.SINGLE} at 5 cm: 0.50° against 0.18°" in worse[0]
+    # within 1.5× of the paper: ours everywhere; the unsourced family's 0.5° only where the paper
+    # has at least 0.34° (single 20 cm before; single 13, 15, 20 cm and 5–20 cm's 20 cm after)
+    near = data["near_paper"]["families"]
+    assert near["ours"] == {"eye": [30, 30], "distance_totals": [6, 6]}
+    assert near["unsourced"] == {"eye": [5, 30], "distance_totals": [0, 6]}
+    assert "| unsourced | 5 of 30 | 0 of 6 |" in text
     # in the Markdown a family worse in many cells of a table is one line
     assert "- unsourced, Table 4: 12 of 12 cells (1.41× to 4.76×)" in text
     assert f"unsourced, Table 2, {paper.SINGLE} at 5 cm" not in text
