@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Reproduces the results report (docs/results/): every experiment of a family for every seed,
 # parallax-eval of each multiple-position model before and after the perturbation, the 5–20 cm
-# models of every family but without kept in docs/results/checkpoints/<experiment>_seed<n>
-# (committed), and the reports. A family is a prefix of the experiment files in conf/experiment/
+# models of the recipe and the paper family (the two a user builds on) kept in
+# docs/results/checkpoints/<experiment>_seed<n> (committed), and the reports. A family is a prefix of the experiment files in conf/experiment/
 # (<family>_algorithm.yaml, the settings its files include, is not an experiment of its own):
 #     bash launch/reproduce.sh              # recipe, paper, unsourced and without, then the report
 #     bash launch/reproduce.sh recipe       # ours (recipe_*)
@@ -222,7 +222,7 @@ for family in "${families[@]}"; do
   done
   # the headline models first, kept and evaluated before the other files are trained
   train_unrecorded "$sweep" "${HEADLINE_SEEDS:-0,1,2,3,4}" "${headline[@]}"
-  keep_models "$sweep" "${headline[@]}"
+  [[ "$family" == recipe || "$family" == paper ]] && keep_models "$sweep" "${headline[@]}"
   evaluate "$sweep" "${headline[@]}"
   train_unrecorded "$sweep" "${SEEDS:-0,1,2}" "${others[@]}"
   evaluate "$sweep" "${others[@]}"
