@@ -26,6 +26,7 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from parallax.config import RESULT_NEUTRAL_KEYS, RUN_TIME_KEYS, compose, run_settings
+from parallax.tools.report.groups import Stat
 from parallax.tools.report.runs import ReportError, Run, find_run_dirs, load_run, read_metrics
 from parallax.writable import file_problem
 
@@ -67,16 +68,6 @@ def row_settings(overrides: list[str]) -> dict[tuple[str, str], dict]:
     return table
 
 
-def _mean_sd(values: list[float]) -> dict | None:
-    values = [v for v in values if v is not None and math.isfinite(v)]
-    if not values:
-        return None
-    mean = sum(values) / len(values)
-    spread = sum((v - mean) ** 2 for v in values) / max(len(values) - 1, 1)
-    sd = math.sqrt(spread)
-    return {"mean": mean, "sd": sd, "n": len(values)}
-
-
 def run_figures(run: Run) -> dict:
     """One run's cells: eye (°) and distance (%) before and after, and the critic's peak."""
     figures: dict = {}
@@ -110,14 +101,14 @@ def sensitivity(folders: list[Path], overrides: list[str]) -> dict:
     table: dict = {setup: {} for setup in SETUPS}
     order = list(ROWS)
     for (row, setup), runs in sorted(found.items(), key=lambda item: order.index(item[0][0])):
-        table[setup][row] = {cell: _mean_sd([r[cell] for r in runs]) for cell in runs[0]}
+        table[setup][row] = {cell: Stat.of(r[cell] for r in runs).as_dict() for cell in runs[0]}
     return {"table": table, "left_out": left_out}
 
 
-def _cell(value: dict | None, digits: int) -> str:
-    if value is None:
-        return "—"
-    return f"{value['mean']:.{digits}f} ± {value['sd']:.{digits}f}"
+def _cell(value: dict, digits: int) -> str:
+    """A cell of the table's JSON form, written as Stat.text writes it."""
+    mean, sd = (math.nan if value[key] is None else value[key] for key in ("mean", "sd"))
+    return Stat(mean, sd, value["n"]).text(digits)
 
 
 def format_table(result: dict) -> str:
@@ -132,7 +123,7 @@ def format_table(result: dict) -> str:
             "|---|---|---|---|---|---|---|",
         ]
         for row, cells in rows.items():
-            seeds = max((c["n"] for c in cells.values() if c), default=0)
+            seeds = max((c["n"] for c in cells.values()), default=0)
             lines.append(
                 f"| {row} | {seeds} | {_cell(cells['eye_before'], 3)} | "
                 f"{_cell(cells['eye_after'], 3)} | {_cell(cells['distance_before'], 2)} | "
