@@ -138,6 +138,11 @@ class MovementPlanner:
         travel_cm = 2.0 * 100.0 * max(self.lateral_positions[k] for k in visited)
         return self.price_per_trial * len(visited) + self.price_per_cm * travel_cm
 
+    def cost(self, candidate: Sequence[int], given: Sequence[int], near_m: float | None) -> float:
+        """What visiting ``candidate`` is expected to cost: its :meth:`expected_error` plus its
+        :meth:`price`, both in percentage points."""
+        return self.expected_error(candidate, given, near_m) + self.price(candidate)
+
     def next_position(self, visited: Sequence[int], pans: Sequence[float]) -> int | None:
         """The index into L to visit next, or None to stop and estimate now."""
         visited = [int(k) for k in visited]
@@ -145,12 +150,8 @@ class MovementPlanner:
         if not candidates:
             return None
         near = self.estimate(visited, pans) if visited else None
-        now = self.expected_error(visited, visited, near) if visited else math.inf
-        now += self.price(visited)
-        costs = [
-            self.expected_error([*visited, k], visited, near) + self.price([*visited, k])
-            for k in candidates
-        ]
+        now = self.cost(visited, visited, near) if visited else math.inf
+        costs = [self.cost([*visited, k], visited, near) for k in candidates]
         best = int(np.argmin(costs))
         return candidates[best] if costs[best] < now else None
 

@@ -93,11 +93,7 @@ def planned_stop(planner: MovementPlanner, pans: np.ndarray, price_per_cm: float
         while stop < r - 1:
             seen = list(range(stop + 1))
             near = planner.estimate(seen, s[: stop + 1])
-            costs = [
-                planner.expected_error(list(range(q + 1)), seen, near)
-                + planner.price(list(range(q + 1)))
-                for q in range(stop, r)
-            ]
+            costs = [planner.cost(list(range(q + 1)), seen, near) for q in range(stop, r)]
             if int(np.argmin(costs)) == 0:
                 break
             stop += 1
