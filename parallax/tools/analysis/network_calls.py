@@ -1,0 +1,114 @@
+"""`python -m parallax.tools.analysis.network_calls RUN...`: what the retraining of a run's
+distance network did (paper §3.5: trained by Levenberg–Marquardt each time a new s joins S), read
+from its logged `metrics.jsonl`.
+
+With a validation stop (``distance.validation_fraction`` > 0, as MATLAB's ``train`` divides the
+data), a fit keeps the weights of its epoch with the lowest validation error. One that stops by
+``max_fail`` after exactly ``max_fail`` accepted epochs found no epoch better than the weights it
+started from: it leaves the network as it was. Per run and block of presentations (before and
+after §5's perturbation, or ``--blocks N``) this prints the fits logged, the share that left the
+network unchanged, their mean accepted epochs, the share that each rule stopped, and the online
+distance error (total, the trainer's window) at the block's end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from parallax.config import load_run_config
+from parallax.tools.report.runs import read_metrics
+
+#: The stop rules a fit logs (``lm_stopped_<rule>``); a fit that none stopped used its epochs.
+RULES = ("max_fail", "min_grad", "mu_max", "non_finite")
+
+
+def block_figures(records: list[dict], max_fail: int | None) -> dict:
+    """One block's figures: fits, unchanged (share of fits; None without a validation stop),
+    mean epochs, the share stopped by each rule and by none ("epochs"), the distance error at its
+    end (None before the first prediction)."""
+    fits = [r for r in records if r.get("lm_trained")]
+    share = {rule: 0.0 for rule in (*RULES, "epochs")}
+    unchanged = None
+    if fits:
+        for rule in RULES:
+            share[rule] = sum(bool(r[f"lm_stopped_{rule}"]) for r in fits) / len(fits)
+        share["epochs"] = 1.0 - sum(share[rule] for rule in RULES)
+        if max_fail is not None:
+            kept = [r for r in fits if r["lm_stopped_max_fail"] and r["lm_epochs"] == max_fail]
+            unchanged = len(kept) / len(fits)
+    return {
+        "first": records[0]["presentation"],
+        "last": records[-1]["presentation"],
+        "fits": len(fits),
+        "unchanged": unchanged,
+        "epochs": sum(r["lm_epochs"] for r in fits) / len(fits) if fits else None,
+        "stopped": share,
+        "distance_error": (records[-1].get("distance_error") or {}).get("total"),
+    }
+
+
+def network_calls(run_dir: str | Path, blocks: int | None = None) -> list[dict]:
+    """The run's blocks (see the module's docstring), in order."""
+    run_dir = Path(run_dir)
+    cfg = load_run_config(run_dir)
+    records = read_metrics(run_dir)
+    if not records:
+        raise ValueError(f"{run_dir}: metrics.jsonl has no presentations")
+    if "lm_trained" not in records[-1]:
+        raise ValueError(f"{run_dir}: metrics.jsonl has no distance-learner fields (lm_*)")
+    validated = float(cfg.distance.validation_fraction) > 0
+    max_fail = int(cfg.distance.max_fail) if validated else None
+    if blocks is None:
+        parts = [
+            [r for r in records if not r.get("perturbed")],
+            [r for r in records if r.get("perturbed")],
+        ]
+    else:
+        parts = [records[k : k + blocks] for k in range(0, len(records), blocks)]
+    return [block_figures(part, max_fail) for part in parts if part]
+
+
+def _share(value: float | None) -> str:
+    return "–" if value is None else f"{100 * value:.1f} %"
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="python -m parallax.tools.analysis.network_calls",
+        description=__doc__.split("\n\n")[0],
+    )
+    parser.add_argument("runs", nargs="+", help="run directories (with metrics.jsonl)")
+    parser.add_argument(
+        "--blocks",
+        type=int,
+        help="presentations a block (default: before and after §5's perturbation)",
+    )
+    args = parser.parse_args(argv)
+    if args.blocks is not None and args.blocks < 1:
+        parser.exit(2, f"{parser.prog}: error: --blocks must be at least 1, got {args.blocks}\n")
+    results = []
+    for run in args.runs:
+        try:
+            results.append((run, network_calls(run, args.blocks)))
+        except (OSError, ValueError) as exc:
+            parser.exit(2, f"{parser.prog}: error: {str(exc).splitlines()[0]}\n")
+    stops = " | ".join(f"stopped by {rule}" for rule in (*RULES, "epochs"))
+    print(f"| run | presentations | fits | unchanged | mean epochs | {stops} | distance error |")
+    print("|---" * (7 + len(RULES)) + "|")
+    for run, rows in results:
+        for row in rows:
+            epochs = "–" if row["epochs"] is None else f"{row['epochs']:.2f}"
+            error = row["distance_error"]
+            shares = " | ".join(_share(row["stopped"][rule]) for rule in (*RULES, "epochs"))
+            print(
+                f"| {run} | {row['first']}–{row['last']} | {row['fits']} | "
+                f"{_share(row['unchanged'])} | {epochs} | {shares} | "
+                f"{'–' if error is None else f'{error:.2f} %'} |"
+            )
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,75 @@
+"""python -m parallax.tools.analysis.network_calls: what each retraining of the distance network
+did, read from a run's metrics.jsonl."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from omegaconf import OmegaConf
+
+from parallax.config.schema import Config
+from parallax.tools.analysis import network_calls as nc
+
+
+def _run(tmp_path, fits, validation_fraction=0.15, perturbed_from=None):
+    """fits: (trained, epochs, stop rule or "") per presentation."""
+    cfg = OmegaConf.structured(Config)
+    cfg.distance.validation_fraction = validation_fraction
+    cfg.distance.max_fail = 6
+    (tmp_path / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
+    lines = []
+    for k, (trained, epochs, stop) in enumerate(fits, start=1):
+        line = {
+            "presentation": k,
+            "perturbed": perturbed_from is not None and k >= perturbed_from,
+            "distance_error": {"total": float(k)},
+            "lm_trained": float(trained),
+            "lm_epochs": float(epochs),
+        }
+        line |= {f"lm_stopped_{rule}": float(rule == stop) for rule in nc.RULES}
+        lines.append(line)
+    (tmp_path / "metrics.jsonl").write_text("".join(json.dumps(l) + "\n" for l in lines))
+    return tmp_path
+
+
+FITS = [
+    (0, 0, ""),  # the queue is not full yet: no fit
+    (1, 40, "max_fail"),  # the first fit, from random weights
+    (1, 6, "max_fail"),  # no epoch beat the starting weights: unchanged
+    (1, 8, "max_fail"),  # its second epoch was the best
+    (1, 6, "max_fail"),
+    (1, 3, "min_grad"),
+]
+
+
+def test_a_fit_that_fails_max_fail_times_from_its_start_leaves_the_network(tmp_path):
+    before, after = nc.network_calls(_run(tmp_path, FITS, perturbed_from=5))
+    assert (before["first"], before["last"], before["fits"]) == (1, 4, 3)
+    assert before["unchanged"] == pytest.approx(1 / 3)
+    assert before["epochs"] == pytest.approx(54 / 3)
+    assert before["stopped"]["max_fail"] == 1.0 and before["distance_error"] == 4.0
+    assert after["unchanged"] == pytest.approx(1 / 2)
+    assert after["stopped"]["min_grad"] == pytest.approx(1 / 2)
+
+
+def test_blocks_and_no_validation_stop(tmp_path, capsys):
+    run = _run(tmp_path, FITS, validation_fraction=0.0)
+    blocks = nc.network_calls(run, blocks=4)
+    assert [(b["first"], b["last"]) for b in blocks] == [(1, 4), (5, 6)]
+    assert all(b["unchanged"] is None for b in blocks)
+    nc.main([str(run), "--blocks", "4"])
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith(f"| {run}")]
+    assert len(rows) == 2 and "| 5–6 | 2 | – |" in rows[1]
+
+
+@pytest.mark.parametrize("args", [["--blocks", "0"], []])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, args):
+    run = tmp_path / "run"
+    run.mkdir()
+    if args:  # a good run, a bad option
+        _run(run, FITS)
+    with pytest.raises(SystemExit) as exit_info:
+        nc.main([str(run), *args])
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err.count("\n") == 1
