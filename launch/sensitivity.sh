@@ -5,8 +5,8 @@
 # conf/open_setting/ that changes the eye (+open_setting=NAME; pan_kept on 5–10 cm only, as it
 # changes nothing at a single position), another of the AEC code's step-size sets
 # (step_sizes=NAME) or another of the dictionary rates η those sets carry (dictionary_rate=NAME);
-# the switch that changes the distance learner only (open_setting=plain_lm) by parallax-replay of
-# the lineage's runs; then the table,
+# the switches that change the distance learner only (open_setting=plain_lm, new_network) by
+# parallax-replay of the lineage's runs; then the table,
 # docs/results/sensitivity.md and .json. Resumable (fixed folders, like launch/reproduce.sh).
 # Arguments with '=' are Hydra overrides for every run; the table is told of them.
 #     bash launch/sensitivity.sh
@@ -44,7 +44,8 @@ else
   done
 fi
 if (( ${#lineage[@]} )); then
-  px_run parallax-replay "${lineage[@]}" --out "$replays" open_setting=plain_lm || status=$?
+  px_run parallax-replay "${lineage[@]}" --out "$replays" open_setting=plain_lm,new_network \
+    || status=$?
 fi
 table_overrides=()
 for arg in "$@"; do table_overrides+=("--override=$arg"); done

@@ -272,6 +272,7 @@ OPEN_SETTINGS = {
     "normalised_features": {"policy.feature_norm"},
     "reset_step_learnt": {"policy.learn_reset_step"},
     "pan_kept": {"env.pan_reset"},
+    "new_network": {"distance.warm_start"},
     "plain_lm": {
         "distance.validation_fraction",
         "distance.test_fraction",

@@ -140,6 +140,7 @@ ADDED_SETTINGS = {
     ("coder", "pairing"): "reference",
     ("env", "motion"): "pick_and_place",
     ("env", "sweep"): dataclasses.asdict(SweepConfig()),  # unread by pick-and-place
+    ("distance", "warm_start"): True,
 }
 
 

@@ -347,6 +347,10 @@ class DistanceConfig:
     #: Start every fit from lm.mu, as each call of MATLAB's train does; false: carry μ over
     #: from the last fit (the queue changes by one vector).
     reset_mu: bool = False
+    #: Each fit starts from the last fit's weights, as calling MATLAB's train again on the same
+    #: network does; false: from new random weights each time (a program that builds its
+    #: network again before each call), for ``initial_epochs``.
+    warm_start: bool = True
     #: Filled by the trainer: the network's initialisation seed.
     seed: int = MISSING
 

@@ -3,11 +3,13 @@
 Each new eye-movement vector s (the pan at the end of each lateral position, degrees) is
 queued with its target distance (eq. 9). Once the queue holds c vectors, every new s triggers a
 warm-started Levenberg–Marquardt fit of the network (eqs. 13–15) on the weighted queue
-(eqs. 10–12): ``initial_epochs`` the first time, ``epochs_per_call`` afterwards.
+(eqs. 10–12): ``initial_epochs`` the first time, ``epochs_per_call`` afterwards. Without
+``warm_start`` every fit starts from new random weights, for ``initial_epochs``.
 
 Scaling: before each fit the network's [−1, 1] input/target scaling is refitted to the current
-(weighted) queue; from the second fit on the weights are re-expressed so that the network's
-function is unchanged by the refit, so the warm start really starts where the last fit ended.
+(weighted) queue; from the second fit on, with a warm start, the weights are re-expressed so
+that the network's function is unchanged by the refit, so the warm start really starts where the
+last fit ended.
 
 μ is carried from one fit to the next (the queue changes by one sample); if a fit ended with
 μ > mu_max the next one starts again from the initial μ. The reported ``loss`` is the mean
@@ -61,6 +63,7 @@ class DistanceLearner:
         test_fraction: float = DistanceConfig.test_fraction,
         max_fail: int = DistanceConfig.max_fail,
         reset_mu: bool = DistanceConfig.reset_mu,
+        warm_start: bool = DistanceConfig.warm_start,
     ) -> None:
         """The settings are distance.*'s (parallax.config checks them); ``sensitivity``, ``lm``
         and ``odometry`` may give only some of their node's settings, the others keep the
@@ -86,8 +89,11 @@ class DistanceLearner:
         self.validation_fraction = float(validation_fraction)
         self.test_fraction = float(test_fraction)
         self.max_fail, self.reset_mu = int(max_fail), bool(reset_mu)
+        self.warm_start = bool(warm_start)
         # dividerand's draws, one permutation of the queue per fit
         self.split_generator = torch.Generator().manual_seed(int(seed) + 1)
+        # the new weights of each fit without a warm start
+        self.init_generator = torch.Generator().manual_seed(int(seed) + 2)
         self.fits = 0
         self.observations = 0
 
@@ -181,8 +187,11 @@ class DistanceLearner:
             self.optimizer.mu = self.optimizer.initial_mu
         inputs, targets = self.queue.inputs, self.queue.targets
         weighted = inputs * self.weights
-        self.network.fit_scaling(weighted, targets, preserve_function=self.fits > 0)
-        epochs = self.initial_epochs if self.fits == 0 else self.epochs_per_call
+        warm = self.fits > 0 and self.warm_start
+        if self.fits > 0 and not warm:
+            self.network.reset_parameters(self.init_generator)
+        self.network.fit_scaling(weighted, targets, preserve_function=warm)
+        epochs = self.epochs_per_call if warm else self.initial_epochs
         fit_inputs, fit_targets, validation = weighted, targets, None
         if self.validation_fraction or self.test_fraction:
             train_rows, validation_rows = (
@@ -269,6 +278,8 @@ class DistanceLearner:
             "fits": self.fits,
             "observations": self.observations,
             "split_generator": self.split_generator.get_state(),
+            # only a learner without a warm start draws from it
+            **({} if self.warm_start else {"init_generator": self.init_generator.get_state()}),
         }
 
     def load_state_dict(self, state: Mapping[str, object]) -> None:
@@ -296,5 +307,7 @@ class DistanceLearner:
         self.target_source.load_state_dict(state["targets"])  # type: ignore[arg-type]
         if "split_generator" in state:  # a learner that never splits may be saved without it
             self.split_generator.set_state(state["split_generator"])  # type: ignore[arg-type]
+        if "init_generator" in state:
+            self.init_generator.set_state(state["init_generator"])  # type: ignore[arg-type]
         self.fits = int(state["fits"])  # type: ignore[arg-type]
         self.observations = int(state["observations"])  # type: ignore[arg-type]

@@ -336,3 +336,40 @@ def test_the_split_stream_resumes_bit_identically():
         straight.network.state_dict().items(), resumed.network.state_dict().values()
     ):
         assert torch.equal(a, b), name
+
+
+@pytest.mark.parametrize("warm_start", [True, False])
+def test_without_a_warm_start_each_fit_starts_from_new_weights(warm_start):
+    """MATLAB's train called again on a network continues from its weights; a program that
+    builds the network again before each call does not: the weights the last fit left then
+    change nothing."""
+    pans, distances = paper_regression(45, np.random.default_rng(8), lateral_positions_m=SMALL_L)
+    learners = [small_learner(warm_start=warm_start) for _ in range(2)]
+    for learner in learners:
+        feed(learner, pans[:44], distances[:44])
+    with torch.no_grad():  # as if the last fit had ended elsewhere
+        learners[1].network.hidden_layer.weight.add_(0.5)
+    for learner in learners:
+        stats = feed(learner, pans[44:], distances[44:])
+    same = all(
+        torch.equal(a, b)
+        for a, b in zip(learners[0].network.parameters(), learners[1].network.parameters())
+    )
+    assert same != warm_start
+    # a fit from new weights gets the first fit's epochs (20), a warm one epochs_per_call (3)
+    assert stats[-1]["epochs"] > 3 if not warm_start else stats[-1]["epochs"] <= 3
+
+
+def test_new_weights_at_every_fit_resume_bit_identically():
+    pans, distances = paper_regression(50, np.random.default_rng(5), lateral_positions_m=SMALL_L)
+    straight = small_learner(warm_start=False)
+    feed(straight, pans, distances)
+    first = small_learner(warm_start=False)
+    feed(first, pans[:44], distances[:44])
+    resumed = small_learner(warm_start=False, seed=123)
+    resumed.load_state_dict(first.state_dict())
+    feed(resumed, pans[44:], distances[44:])
+    for (name, a), b in zip(
+        straight.network.state_dict().items(), resumed.network.state_dict().values()
+    ):
+        assert torch.equal(a, b), name
