@@ -12,10 +12,11 @@ from parallax.config.schema import Config
 from parallax.tools.analysis import network_calls as nc
 
 
-def _run(tmp_path, fits, validation_fraction=0.15, perturbed_from=None):
+def _run(tmp_path, fits, validation_fraction=0.15, perturbed_from=None, warm_start=True):
     """fits: (trained, epochs, stop rule or "") per presentation."""
     cfg = OmegaConf.structured(Config)
     cfg.distance.validation_fraction = validation_fraction
+    cfg.distance.warm_start = warm_start
     cfg.distance.max_fail = 6
     (tmp_path / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
     lines = []
@@ -53,8 +54,11 @@ def test_a_fit_that_fails_max_fail_times_from_its_start_leaves_the_network(tmp_p
     assert after["stopped"]["min_grad"] == pytest.approx(1 / 2)
 
 
-def test_blocks_and_no_validation_stop(tmp_path, capsys):
-    run = _run(tmp_path, FITS, validation_fraction=0.0)
+@pytest.mark.parametrize("settings", [{"validation_fraction": 0.0}, {"warm_start": False}])
+def test_blocks_and_no_unchanged_share_without_a_validation_stop_or_a_warm_start(
+    tmp_path, capsys, settings
+):
+    run = _run(tmp_path, FITS, **settings)
     blocks = nc.network_calls(run, blocks=4)
     assert [(b["first"], b["last"]) for b in blocks] == [(1, 4), (5, 6)]
     assert all(b["unchanged"] is None for b in blocks)

@@ -4,11 +4,12 @@ from its logged `metrics.jsonl`.
 
 With a validation stop (``distance.validation_fraction`` > 0, as MATLAB's ``train`` divides the
 data), a fit keeps the weights of its epoch with the lowest validation error. One that stops by
-``max_fail`` after exactly ``max_fail`` accepted epochs found no epoch better than the weights it
-started from: it leaves the network as it was. Per run and block of presentations (before and
-after §5's perturbation, or ``--blocks N``) this prints the fits logged, the share that left the
-network unchanged, their mean accepted epochs, the share that each rule stopped, and the online
-distance error (total, the trainer's window) at the block's end.
+``max_fail`` after exactly ``max_fail`` accepted epochs found no epoch better than the weights
+it started from: with a warm start (``distance.warm_start``), it leaves the network as it was.
+Per run and block of presentations (before and after §5's perturbation, or ``--blocks N``) this
+prints the fits logged, the share that left the network unchanged, their mean accepted epochs,
+the share that each rule stopped, and the online distance error (total, the trainer's window) at
+the block's end.
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ RULES = ("max_fail", "min_grad", "mu_max", "non_finite")
 
 
 def block_figures(records: list[dict], max_fail: int | None) -> dict:
-    """One block's figures: fits, unchanged (share of fits; None without a validation stop),
+    """One block's figures: fits, unchanged (share of fits; None without a validation stop or
+    a warm start: ``max_fail`` None),
     mean epochs, the share stopped by each rule and by none ("epochs"), the distance error at its
     end (None before the first prediction)."""
     fits = [r for r in records if r.get("lm_trained")]
@@ -59,7 +61,7 @@ def network_calls(run_dir: str | Path, blocks: int | None = None) -> list[dict]:
         raise ValueError(f"{run_dir}: metrics.jsonl has no presentations")
     if "lm_trained" not in records[-1]:
         raise ValueError(f"{run_dir}: metrics.jsonl has no distance-learner fields (lm_*)")
-    validated = float(cfg.distance.validation_fraction) > 0
+    validated = float(cfg.distance.validation_fraction) > 0 and cfg.distance.warm_start
     max_fail = int(cfg.distance.max_fail) if validated else None
     if blocks is None:
         parts = [
