@@ -2,8 +2,9 @@
 # Reproduces the results report (docs/results/): every experiment of a family for every seed,
 # parallax-eval of each multiple-position model before and after the perturbation, the 5–20 cm
 # models of the recipe and the paper family (the two a user builds on) kept in
-# docs/results/checkpoints/<experiment>_seed<n> (committed), and the reports. A family is a prefix of the experiment files in conf/experiment/
-# (<family>_algorithm.yaml, the settings its files include, is not an experiment of its own):
+# docs/results/checkpoints/<experiment>_seed<n> (committed), and the reports. A family is a
+# prefix of the experiment files in conf/experiment/ (<family>_algorithm.yaml, the settings its
+# files include, is not an experiment of its own):
 #     bash launch/reproduce.sh              # recipe, paper, unsourced and without, then the report
 #     bash launch/reproduce.sh recipe       # ours (recipe_*)
 #     bash launch/reproduce.sh paper        # the paper's algorithm, its open settings from its

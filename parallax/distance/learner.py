@@ -188,7 +188,7 @@ class DistanceLearner:
         inputs, targets = self.queue.inputs, self.queue.targets
         weighted = inputs * self.weights
         warm = self.fits > 0 and self.warm_start
-        if self.fits > 0 and not warm:
+        if self.fits > 0 and not self.warm_start:
             self.network.reset_parameters(self.init_generator)
         self.network.fit_scaling(weighted, targets, preserve_function=warm)
         epochs = self.epochs_per_call if warm else self.initial_epochs

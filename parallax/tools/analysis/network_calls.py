@@ -61,8 +61,10 @@ def network_calls(run_dir: str | Path, blocks: int | None = None) -> list[dict]:
         raise ValueError(f"{run_dir}: metrics.jsonl has no presentations")
     if "lm_trained" not in records[-1]:
         raise ValueError(f"{run_dir}: metrics.jsonl has no distance-learner fields (lm_*)")
-    validated = float(cfg.distance.validation_fraction) > 0 and cfg.distance.warm_start
-    max_fail = int(cfg.distance.max_fail) if validated else None
+    # a fit that keeps its starting weights leaves the network unchanged only when it has a
+    # validation stop and starts from the last fit's weights
+    kept_is_unchanged = float(cfg.distance.validation_fraction) > 0 and cfg.distance.warm_start
+    max_fail = int(cfg.distance.max_fail) if kept_is_unchanged else None
     if blocks is None:
         parts = [
             [r for r in records if not r.get("perturbed")],

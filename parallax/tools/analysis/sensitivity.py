@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
@@ -107,9 +106,7 @@ def sensitivity(folders: list[Path], overrides: list[str]) -> dict:
 
 
 def _cell(value: dict, digits: int) -> str:
-    """A cell of the table's JSON form, written as Stat.text writes it."""
-    mean, sd = (math.nan if value[key] is None else value[key] for key in ("mean", "sd"))
-    return Stat(mean, sd, value["n"]).text(digits)
+    return Stat.from_dict(value).text(digits)
 
 
 def format_table(result: dict) -> str:

@@ -72,12 +72,6 @@ OURS, OURS_HEADER = "ours", "ours (recipe)"
 TEXTURES_PHOTOGRAPHS = "held-out photographs"
 
 
-def _stat(d: dict | None) -> Stat:
-    if not d:
-        return Stat(float("nan"), float("nan"), 0)
-    return Stat(*(float("nan") if d.get(k) is None else d[k] for k in ("mean", "sd")), d["n"])
-
-
 def _text(stat: Stat, digits: int = 2) -> str:
     return "—" if stat.n == 0 else f"{stat.text(digits)} (n={stat.n})"
 
@@ -114,7 +108,7 @@ def eye_table(families: dict[str, dict], key: str) -> tuple[str, dict, list[dict
             cell = {"paper": None if published is None else published[0]}
             for family, result in families.items():
                 found = result["paper"][key]["cells"].get(column, {}).get(position) or {}
-                stat = _stat((found.get("ours") or {}).get("mean"))
+                stat = Stat.from_dict((found.get("ours") or {}).get("mean"))
                 row.append("-" if published is None else _text(stat))
                 cell[family] = stat.as_dict()
                 if published is None or not stat.n:
@@ -148,7 +142,7 @@ def distance_table(families: dict[str, dict], key: str) -> tuple[str, dict, list
             cell = {"paper": published[r]}
             for family, result in families.items():
                 found = result["paper"][key]["rows"].get(row_name) or {}
-                stat = _stat((found.get("ours") or {}).get(r))
+                stat = Stat.from_dict((found.get("ours") or {}).get(r))
                 row.append(_text(stat))
                 cell[family] = stat.as_dict()
                 if not stat.n:
@@ -333,7 +327,7 @@ def readme_table(data: dict) -> str:
                 + [
                     "not yet run"
                     if not total[f]["n"]
-                    else f"{_stat(total[f]).text()} % (n={total[f]['n']})"
+                    else f"{Stat.from_dict(total[f]).text()} % (n={total[f]['n']})"
                     for f in families
                 ]
             )

@@ -71,6 +71,13 @@ class Stat:
     def as_dict(self) -> dict:
         return {"mean": finite_or_none(self.mean), "sd": finite_or_none(self.sd), "n": self.n}
 
+    @classmethod
+    def from_dict(cls, d: dict | None) -> Stat:
+        """The inverse of :meth:`as_dict` (None, or an empty dict, for no seeds)."""
+        if not d:
+            return cls(math.nan, math.nan, 0)
+        return cls(*(math.nan if d.get(k) is None else d[k] for k in ("mean", "sd")), d["n"])
+
 
 def finite_or_none(value: Any) -> Any:
     return value if not (isinstance(value, float) and not math.isfinite(value)) else None

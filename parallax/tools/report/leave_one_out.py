@@ -142,7 +142,7 @@ def leave_one_out(paths: Sequence[str | Path]) -> dict:
 
 
 def _cell(row: dict, key: str) -> str:
-    stat = Stat(**{k: float("nan") if v is None else v for k, v in row[key].items()})
+    stat = Stat.from_dict(row[key])
     text = stat.text(3 if key.startswith("eye") else 2)
     if f"{key}_change" in row and stat.n:
         change = row[f"{key}_change"]
