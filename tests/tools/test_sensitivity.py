@@ -4,6 +4,7 @@ study by their settings, and their cells read from their summaries."""
 from __future__ import annotations
 
 import json
+import shutil
 
 import pytest
 
@@ -49,7 +50,36 @@ def test_runs_go_to_the_row_of_their_settings(study, tmp_path, capsys):
     assert [entry.split(":")[0] for entry in result["left_out"]] == [str(study / "other")]
     assert json.loads(out.read_text())["table"]["single_5"].keys() == rows.keys()
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("| lineage |"))
-    assert line.startswith(f"| lineage | 1 | {want:.3f} |")
+    assert line.startswith(f"| lineage | 1 | — | {want:.3f} |")
+
+
+def _stopped_copy(study, root, name, last_norm):
+    """A copy of the lineage's run that stopped before its summary, its last two records with
+    the critic's norm ``last_norm``."""
+    run = root / name
+    shutil.copytree(study / "lineage", run)
+    (run / "summary.json").unlink()
+    records = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
+    for record in records[-2:]:
+        record["policy_critic_norm"] = last_norm
+        record["policy_critic_scale"] = 1e31 if last_norm == float("inf") else 0.5
+    (run / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    return records[-2]["presentation"]
+
+
+def test_a_run_stopped_by_non_finite_numbers_counts_as_diverged(study, tmp_path, capsys):
+    root = tmp_path / "study"
+    shutil.copytree(study / "lineage", root / "lineage")
+    at = _stopped_copy(study, root, "diverged", float("inf"))
+    _stopped_copy(study, root, "killed", 1.0)  # unfinished with finite numbers: left out
+    result = sensitivity.main([str(root)] + [f"--override={o}" for o in SHRUNK])
+    lineage = result["table"]["single_5"]["lineage"]
+    assert lineage["diverged"] == [at]
+    assert lineage["eye_before"]["n"] == 1  # the diverged run has no eye figure
+    assert lineage["critic_peak"]["n"] == 2 and lineage["critic_peak"]["mean"] > 1e30
+    assert [entry.split(":")[0] for entry in result["left_out"]] == [str(root / "killed")]
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("| lineage |"))
+    assert line.startswith(f"| lineage | 2 | presentation {at} |")
 
 
 def test_an_unwritable_json_is_one_line_and_exit_2(study, tmp_path, capsys):

@@ -12,13 +12,17 @@ a run of other settings is never counted in a row.
 Each row and set-up shows, as mean ± standard deviation over the seeds: the eye's error of
 Tables 2–3 (the last-100-trial mean, averaged over L) before and after §5's perturbation, the
 online distance error of Tables 4–5 (total) before and after, and the critic's peak scale
-(max over the run of mean |v·φ|; it grows without bound when the actor-critic diverges).
+(max over the run of mean |v·φ|; it grows without bound when the actor-critic diverges). A run
+the trainer stopped because its policy's numbers were no longer finite (``train.
+stop_after_non_finite``) is a result of its row, not a missing run: it is counted as diverged,
+at the presentation where its numbers stopped being finite, and adds only its critic's peak.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -50,6 +54,14 @@ ROWS = {
 #: Settings a run's row does not depend on: its seed, those filled at run time, and those that
 #: change no result.
 IGNORED = {"seed", *RUN_TIME_KEYS, *RESULT_NEUTRAL_KEYS}
+#: A row's cells, in the table's order.
+CELLS = (
+    "eye_before",
+    "eye_after",
+    "distance_before",
+    "distance_after",
+    "critic_peak",
+)
 
 
 def _settings(config: dict) -> dict:
@@ -68,6 +80,36 @@ def row_settings(overrides: list[str]) -> dict[tuple[str, str], dict]:
     return table
 
 
+def _policy_finite(record: dict) -> bool:
+    return all(
+        not (isinstance(v, float) and not math.isfinite(v))
+        for k, v in record.items()
+        if k.startswith("policy_")
+    )
+
+
+def diverged_at(path: Path) -> int | None:
+    """The presentation from which an unfinished run's policy statistics were no longer finite
+    up to its last record (the trainer stops such a run), or None when its last one is finite."""
+    records = read_metrics(path)
+    start = None
+    for record in reversed(records):
+        if _policy_finite(record):
+            break
+        start = record["presentation"]
+    return start
+
+
+def critic_peak(path: Path) -> float | None:
+    """The largest finite mean |v·φ| a run logged (None for a replay, which logs no policy)."""
+    try:
+        scales = [r.get("policy_critic_scale") for r in read_metrics(path)]
+    except FileNotFoundError:
+        return None
+    scales = [s for s in scales if isinstance(s, (int, float)) and math.isfinite(s)]
+    return max(scales) if scales else None
+
+
 def run_figures(run: Run) -> dict:
     """One run's cells: eye (°) and distance (%) before and after, and the critic's peak."""
     figures: dict = {}
@@ -76,37 +118,47 @@ def run_figures(run: Run) -> dict:
         means = [cell["mean"] for cell in trials.values() if cell.get("mean") is not None]
         figures[f"eye_{phase}"] = sum(means) / len(means) if means else None
         figures[f"distance_{phase}"] = (run.online_distance(phase) or {}).get("total")
-    try:
-        scales = [r.get("policy_critic_scale") for r in read_metrics(run.path)]
-    except FileNotFoundError:  # a replay logs no policy
-        scales = []
-    scales = [s for s in scales if isinstance(s, (int, float))]
-    figures["critic_peak"] = max(scales) if scales else None
+    figures["critic_peak"] = critic_peak(run.path)
     return figures
 
 
 def sensitivity(folders: list[Path], overrides: list[str]) -> dict:
-    """The table: {setup: {row: {cell: mean ± sd over seeds}}}, and the runs left out."""
+    """The table: {setup: {row: {cell: mean ± sd over seeds, "diverged": [presentation, …]}}},
+    and the runs left out."""
     wanted = row_settings(overrides)
     found: dict[tuple[str, str], list[dict]] = {}
+    diverged: dict[tuple[str, str], list[int]] = {}
     left_out = []
     for folder in folders:
         for path in find_run_dirs(folder):
             run = load_run(path)
             key = next((k for k, s in wanted.items() if s == _settings(run.config)), None)
-            if run.problem is not None or key is None:
+            stopped = diverged_at(path) if run.problem is not None else None
+            if key is not None and stopped is not None:
+                diverged.setdefault(key, []).append(stopped)
+                found.setdefault(key, []).append({"critic_peak": critic_peak(path)})
+            elif run.problem is not None or key is None:
                 left_out.append(f"{path}: {run.problem or 'settings of no row'}")
-                continue
-            found.setdefault(key, []).append(run_figures(run))
+            else:
+                found.setdefault(key, []).append(run_figures(run))
     table: dict = {setup: {} for setup in SETUPS}
     order = list(ROWS)
     for (row, setup), runs in sorted(found.items(), key=lambda item: order.index(item[0][0])):
-        table[setup][row] = {cell: Stat.of(r[cell] for r in runs).as_dict() for cell in runs[0]}
+        cells = {cell: Stat.of(r.get(cell) for r in runs).as_dict() for cell in CELLS}
+        table[setup][row] = {**cells, "diverged": sorted(diverged.get((row, setup), []))}
     return {"table": table, "left_out": left_out}
 
 
 def _cell(value: dict, digits: int) -> str:
     return Stat.from_dict(value).text(digits)
+
+
+def _peak(value: dict) -> str:
+    """The critic's peak to three significant digits: it spans 0.1 to 1e31."""
+    stat = Stat.from_dict(value)
+    if stat.n == 0:
+        return "—"
+    return f"{stat.mean:.3g}" + (f" ± {stat.sd:.3g}" if stat.n >= 2 else "")
 
 
 def format_table(result: dict) -> str:
@@ -116,16 +168,18 @@ def format_table(result: dict) -> str:
             continue
         lines += [
             f"sensitivity_{setup}",
-            "| row | seeds | eye before (°) | eye after (°) | distance before (%) "
+            "| row | seeds | diverged at | eye before (°) | eye after (°) | distance before (%) "
             "| distance after (%) | critic peak |",
-            "|---|---|---|---|---|---|---|",
+            "|---|---|---|---|---|---|---|---|",
         ]
         for row, cells in rows.items():
-            seeds = max((c["n"] for c in cells.values()), default=0)
+            stopped = cells["diverged"]
+            seeds = max(cells["eye_before"]["n"], cells["distance_before"]["n"]) + len(stopped)
+            where = ", ".join(f"presentation {p}" for p in stopped) or "—"
             lines.append(
-                f"| {row} | {seeds} | {_cell(cells['eye_before'], 3)} | "
+                f"| {row} | {seeds} | {where} | {_cell(cells['eye_before'], 3)} | "
                 f"{_cell(cells['eye_after'], 3)} | {_cell(cells['distance_before'], 2)} | "
-                f"{_cell(cells['distance_after'], 2)} | {_cell(cells['critic_peak'], 3)} |"
+                f"{_cell(cells['distance_after'], 2)} | {_peak(cells['critic_peak'])} |"
             )
         lines.append("")
     lines += [f"left out: {entry}" for entry in result["left_out"]]
