@@ -2,11 +2,11 @@
 # The sensitivity study of the paper family (docs/paper_algorithm.md): what its numbers rest on.
 # experiment=sensitivity_single_5 and sensitivity_multi_5_10 (the paper's set-ups in shorter
 # runs) for every seed, with the lineage's settings and with one switch each: a file of
-# conf/open_setting/ that changes the eye (+open_setting=NAME; pan_kept on 5–10 cm only, as it
-# changes nothing at a single position), another of the AEC code's step-size sets
-# (step_sizes=NAME) or another of the dictionary rates η those sets carry (dictionary_rate=NAME);
-# the switches that change the distance learner only (open_setting=plain_lm, new_network) by
-# parallax-replay of the lineage's runs; then the table,
+# conf/open_setting/ that changes the eye (+open_setting=NAME; reset_step_learnt and pan_kept on
+# 5–10 cm only, as they change nothing at a single position), another of the AEC code's
+# step-size sets (step_sizes=NAME) or another of the dictionary rates η those sets carry
+# (dictionary_rate=NAME); the switches that change the distance learner only
+# (open_setting=plain_lm, new_network) by parallax-replay of the lineage's runs; then the table,
 # docs/results/sensitivity.md and .json. Resumable (fixed folders, like launch/reproduce.sh).
 # Arguments with '=' are Hydra overrides for every run; the table is told of them.
 #     bash launch/sensitivity.sh
@@ -19,12 +19,15 @@ setups="experiment=sensitivity_single_5,sensitivity_multi_5_10"
 seeds="seed=${SEEDS:-0,1,2}"
 status=0
 px_sweep "$sweep" "$setups" "$seeds" "$@" || status=$?
-for setting in xi_1 projection normalised_features reset_step_learnt; do
+for setting in xi_1 projection normalised_features; do
   px_sweep "$sweep" "$setups" "+open_setting=$setting" "$seeds" "$@" || status=$?
 done
-# the pan kept between lateral positions: the same runs as the lineage's at a single position
-px_sweep "$sweep" "experiment=sensitivity_multi_5_10" "+open_setting=pan_kept" "$seeds" "$@" \
-  || status=$?
+# the step across a pan reset learnt, the pan kept between lateral positions: both act only from
+# one lateral position to the next, so at a single position their runs are the lineage's
+for setting in reset_step_learnt pan_kept; do
+  px_sweep "$sweep" "experiment=sensitivity_multi_5_10" "+open_setting=$setting" "$seeds" "$@" \
+    || status=$?
+done
 for set in origin chong lukas; do
   px_sweep "$sweep" "$setups" "step_sizes=$set" "$seeds" "$@" || status=$?
 done

@@ -396,7 +396,8 @@ def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
     ]
     for line in sweeps:
         both = "sensitivity_single_5\\,sensitivity_multi_5_10"
-        setups = "sensitivity_multi_5_10" if "pan_kept" in line else both
+        one_position = "reset_step_learnt" in line or "pan_kept" in line
+        setups = "sensitivity_multi_5_10" if one_position else both
         assert f"experiment={setups} " in line
         assert "seed=0\\,1\\,2" in line and line.rstrip().endswith("train.presentations=7")
     (replay,) = [l for l in lines if l.startswith("parallax-replay ")]
