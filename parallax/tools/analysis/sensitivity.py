@@ -167,7 +167,8 @@ def format_table(result: dict) -> str:
         if not rows:
             continue
         lines += [
-            f"sensitivity_{setup}",
+            f"sensitivity_{setup}:",
+            "",
             "| row | seeds | diverged at | eye before (°) | eye after (°) | distance before (%) "
             "| distance after (%) | critic peak |",
             "|---|---|---|---|---|---|---|---|",
