@@ -29,6 +29,7 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from parallax.config import RESULT_NEUTRAL_KEYS, RUN_TIME_KEYS, compose, run_settings
+from parallax.health import non_finite_policy
 from parallax.tools.report.groups import Stat
 from parallax.tools.report.runs import ReportError, Run, find_run_dirs, load_run, read_metrics
 from parallax.writable import file_problem
@@ -80,21 +81,13 @@ def row_settings(overrides: list[str]) -> dict[tuple[str, str], dict]:
     return table
 
 
-def _policy_finite(record: dict) -> bool:
-    return all(
-        not (isinstance(v, float) and not math.isfinite(v))
-        for k, v in record.items()
-        if k.startswith("policy_")
-    )
-
-
 def diverged_at(path: Path) -> int | None:
     """The presentation from which an unfinished run's policy statistics were no longer finite
     up to its last record (the trainer stops such a run), or None when its last one is finite."""
     records = read_metrics(path)
     start = None
     for record in reversed(records):
-        if _policy_finite(record):
+        if not non_finite_policy(record):
             break
         start = record["presentation"]
     return start
@@ -102,10 +95,7 @@ def diverged_at(path: Path) -> int | None:
 
 def critic_peak(path: Path) -> float | None:
     """The largest finite mean |v·φ| a run logged (None for a replay, which logs no policy)."""
-    try:
-        scales = [r.get("policy_critic_scale") for r in read_metrics(path)]
-    except FileNotFoundError:
-        return None
+    scales = [r.get("policy_critic_scale") for r in read_metrics(path)]
     scales = [s for s in scales if isinstance(s, (int, float)) and math.isfinite(s)]
     return max(scales) if scales else None
 

@@ -46,7 +46,9 @@ from parallax.tools.report.runs import (
 
 FORMATS = {"xz": ".xz", "gz": ".gz"}
 #: The keys of a metrics.jsonl line that the reports (figures, Tables 2–3's curves), the
-#: convergence, time-to-learn and collapse analyses and the continuous sweep's report read.
+#: convergence, time-to-learn and collapse analyses, the continuous sweep's report and the
+#: sensitivity table (the critic's norm: the statistic that overflows first in a diverged run)
+#: read.
 READ_BY_REPORTS = (
     "presentation",
     "steps",
@@ -58,6 +60,7 @@ READ_BY_REPORTS = (
     "mae_recent_per_position",
     "distance_error",
     "policy_critic_scale",
+    "policy_critic_norm",
     "policy_entropy",
     "policy_actor_norm",
     "learnt_distance",
