@@ -15,9 +15,10 @@ Non-finite numbers. The policy skips an update whose step is not finite, and the
 Levenberg–Marquardt fit stops on a non-finite Jacobian; a statistic that overflowed (‖w‖ = inf)
 is another sign. A presentation with any of these is unhealthy: the run says so when it starts,
 writes no checkpoint while it lasts (the last one written is the last good state) and, after
-``train.stop_after_non_finite`` unhealthy presentations in a row, stops with :class:`Diverged`.
-With ``train.stop_after_non_finite=null`` it says so and runs on, checkpoints included, for a
-study of divergence.
+``train.stop_after_non_finite`` unhealthy presentations in a row, stops with :class:`Diverged`,
+leaving :data:`DIVERGED_NAME` in the run directory: the run is over, as one with a summary is,
+and the report and compaction tools read it as such. With ``train.stop_after_non_finite=null``
+it says so and runs on, checkpoints included, for a study of divergence.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ from typing import Any
 
 from tqdm import tqdm
 
+#: What a run stopped by :class:`Diverged` leaves in its directory (:meth:`Health.stop_record`).
+DIVERGED_NAME = "diverged.json"
 #: The distance learner's statistics that must be finite once it has fitted (parallax.distance).
 _FITTED_STATS = ("lm_loss", "lm_rmse_m", "lm_grad_norm", "lm_mu")
 
@@ -140,6 +143,18 @@ class Health:
             "sizes of the learner named (docs/reliability.md), or let a study of divergence run "
             "on with train.stop_after_non_finite=null"
         )
+
+    def stop_record(self, presentation: int, kept: tuple[Path, int] | None) -> dict[str, Any]:
+        """What :data:`DIVERGED_NAME` holds when the run stops after ``presentation``: where it
+        stopped, the first presentation of the unhealthy streak, what was not finite and the
+        last good checkpoint's presentation (None if none); no paths, so that a record moved
+        elsewhere stays true."""
+        return {
+            "stopped_at": presentation,
+            "unhealthy_since": presentation - self.streak + 1,
+            "problems": self.problems,
+            "last_checkpoint": None if kept is None else kept[1],
+        }
 
     def state_dict(self) -> dict[str, Any]:
         return {"critic_warned": self.critic_warned, "streak": self.streak}

@@ -10,6 +10,7 @@ Tables 4–5). Everything a run writes lives in its run directory:
                       eye-movement vectors s the distance learner saw (for parallax-replay)
     checkpoint.pt     the latest checkpoint (atomic), and checkpoint_previous.pt the one before
     summary.json      the final summary (and the one before the perturbation)
+    diverged.json     instead of a summary, for a run stopped as its numbers stopped being finite
 
 After each presentation :mod:`parallax.health` reads its record: a diverging critic is named
 once, and numbers that stopped being finite hold back the checkpoints and, in the end, stop the
@@ -36,7 +37,7 @@ from parallax.config import (
 )
 from parallax.distance_step import distance_step
 from parallax.experiment import Experiment
-from parallax.health import Diverged, Health
+from parallax.health import DIVERGED_NAME, Diverged, Health
 from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, position_label
 from parallax.movement import movement
 from parallax.parts import Parts
@@ -280,6 +281,9 @@ class Trainer:
                 if keep_view:
                     log.images(self.exp.coder, pres, self.steps)
                 if self.health.must_stop:
+                    stop = self.health.stop_record(self.presentation, self.saved)
+                    mark = json.dumps(stop, indent=2, allow_nan=False) + "\n"
+                    (self.run_dir / DIVERGED_NAME).write_text(mark)
                     message = self.health.stop_message(self.presentation, self.saved)
                     log.writer.add_text("health", message, self.steps)
                     raise Diverged(message)
@@ -297,6 +301,8 @@ class Trainer:
         record the config, and set the switches of where the run stands; whether it resumed."""
         resumed = bool(self.cfg.resume) and self.restore()
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        # a run that goes on from its last good checkpoint is no longer over
+        (self.run_dir / DIVERGED_NAME).unlink(missing_ok=True)
         if not resumed:  # a start from scratch: no lines of an earlier start without a checkpoint
             self.metrics_path.write_text("")
         config = OmegaConf.to_yaml(self.cfg, resolve=True)

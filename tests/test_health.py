@@ -5,6 +5,7 @@ on."""
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import subprocess
@@ -13,7 +14,9 @@ import sys
 import pytest
 
 from parallax import checkpoint
-from parallax.health import Health
+from parallax.health import DIVERGED_NAME, Health
+from parallax.tools.report.compact import compact
+from parallax.tools.report.runs import load_run
 from tests.conftest import TINY, train_tiny_run
 
 #: A critic step size that drives the tiny run's critic past every bound, then to overflow.
@@ -86,6 +89,13 @@ def test_a_run_driven_to_overflow_stops_with_one_line_and_keeps_its_last_good_ch
     assert kept == stopped_at - 3
     assert checkpoint.read(run / checkpoint.CHECKPOINT_NAME)["presentation"] == kept
     assert not (run / "summary.json").exists()
+    # the run is over: its diverged.json says where, the reports and compaction read it so
+    stop = json.loads((run / DIVERGED_NAME).read_text())
+    assert (stop["stopped_at"], stop["unhealthy_since"]) == (stopped_at, kept + 1)
+    assert stop["last_checkpoint"] == kept and f"({stop['problems']})" in errors[0]
+    loaded = load_run(run)
+    assert loaded.diverged == stop and loaded.problem.startswith("diverged: stopped at")
+    assert compact([run])[:2] == (1, 1) and (run / "metrics.jsonl.xz").is_file()
 
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
@@ -93,6 +103,14 @@ def test_a_run_driven_to_overflow_stops_with_one_line_and_keeps_its_last_good_ch
     assert "health/text_summary" in events.Tags()["tensors"]
     # the critic's line, the first non-finite presentation's, the stop
     assert len(events.Tensors("health/text_summary")) == 3
+
+
+def test_a_diverged_run_that_goes_on_from_its_checkpoint_is_no_longer_over(tmp_path):
+    run = tmp_path / "run"
+    (run / DIVERGED_NAME).parent.mkdir()
+    (run / DIVERGED_NAME).write_text("{}")  # an earlier stop's mark
+    run = train_tiny_run(run, ["train.presentations=2"])
+    assert (run / "summary.json").is_file() and not (run / DIVERGED_NAME).exists()
 
 
 def test_with_null_a_diverging_run_goes_on_to_the_end(tmp_path, capsys):

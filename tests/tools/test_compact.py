@@ -103,7 +103,7 @@ def test_a_plain_record_beside_a_compressed_one_is_the_newer(tmp_path, capsys):
     (run / "eval.json").write_text(json.dumps(newer))  # parallax-eval writes plain files
     assert load_run(run).evals[0]["note"] == "evaluated again"
     main([str(root), "--format", "gz"])  # converts, and the new eval replaces the old one
-    assert "2 finished runs: 6 records compressed (gz)" in capsys.readouterr().out
+    assert "2 runs finished or diverged: 6 records compressed (gz)" in capsys.readouterr().out
     assert sorted(p.name for p in run.iterdir() if "eval" in p.name) == [
         "eval.json.gz",
         "eval_before",

@@ -9,6 +9,7 @@ import shutil
 import pytest
 
 from parallax.config import compose
+from parallax.health import DIVERGED_NAME, Health
 from parallax.tools.analysis import sensitivity
 from parallax.trainer import Trainer
 from tests.conftest import TINY
@@ -53,16 +54,22 @@ def test_runs_go_to_the_row_of_their_settings(study, tmp_path, capsys):
     assert line.startswith(f"| lineage | 1 | — | {want:.3f} |")
 
 
-def _stopped_copy(study, root, name, last_norm):
-    """A copy of the lineage's run that stopped before its summary, its last two records with
-    the critic's norm ``last_norm``."""
+def _stopped_copy(study, root, name, diverged):
+    """A copy of the lineage's run that stopped before its summary: killed, or (``diverged``)
+    stopped as the trainer stops one whose numbers are not finite, its last two records with an
+    infinite critic norm and the trainer's diverged.json; the first of those two presentations."""
     run = root / name
     shutil.copytree(study / "lineage", run)
     (run / "summary.json").unlink()
     records = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
-    for record in records[-2:]:
-        record["policy_critic_norm"] = last_norm
-        record["policy_critic_scale"] = 1e31 if last_norm == float("inf") else 0.5
+    if diverged:
+        health = Health(critic_scale_warning=100.0, stop_after_non_finite=2)
+        for record in records[-2:]:
+            record["policy_critic_norm"], record["policy_critic_scale"] = float("inf"), 1e31
+            health.check(record, skipped_total=0, fitted=False)
+        assert health.must_stop
+        stop = health.stop_record(records[-1]["presentation"], kept=None)
+        (run / DIVERGED_NAME).write_text(json.dumps(stop))
     (run / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     return records[-2]["presentation"]
 
@@ -70,8 +77,8 @@ def _stopped_copy(study, root, name, last_norm):
 def test_a_run_stopped_by_non_finite_numbers_counts_as_diverged(study, tmp_path, capsys):
     root = tmp_path / "study"
     shutil.copytree(study / "lineage", root / "lineage")
-    at = _stopped_copy(study, root, "diverged", float("inf"))
-    _stopped_copy(study, root, "killed", 1.0)  # unfinished with finite numbers: left out
+    at = _stopped_copy(study, root, "diverged", diverged=True)
+    _stopped_copy(study, root, "killed", diverged=False)  # unfinished, not diverged: left out
     result = sensitivity.main([str(root)] + [f"--override={o}" for o in SHRUNK])
     lineage = result["table"]["single_5"]["lineage"]
     assert lineage["diverged"] == [at]

@@ -14,8 +14,9 @@ Tables 2–3 (the last-100-trial mean, averaged over L) before and after §5's p
 online distance error of Tables 4–5 (total) before and after, and the critic's peak scale
 (max over the run of mean |v·φ|; it grows without bound when the actor-critic diverges). A run
 the trainer stopped because its policy's numbers were no longer finite (``train.
-stop_after_non_finite``) is a result of its row, not a missing run: it is counted as diverged,
-at the presentation where its numbers stopped being finite, and adds only its critic's peak.
+stop_after_non_finite``, leaving its ``diverged.json``) is a result of its row, not a missing
+run: it is counted as diverged, at the first presentation whose numbers were not finite, and adds
+only its critic's peak.
 """
 
 from __future__ import annotations
@@ -29,7 +30,6 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from parallax.config import RESULT_NEUTRAL_KEYS, RUN_TIME_KEYS, compose, run_settings
-from parallax.health import non_finite_policy
 from parallax.tools.report.groups import Stat
 from parallax.tools.report.runs import ReportError, Run, find_run_dirs, load_run, read_metrics
 from parallax.writable import file_problem
@@ -81,18 +81,6 @@ def row_settings(overrides: list[str]) -> dict[tuple[str, str], dict]:
     return table
 
 
-def diverged_at(path: Path) -> int | None:
-    """The presentation from which an unfinished run's policy statistics were no longer finite
-    up to its last record (the trainer stops such a run), or None when its last one is finite."""
-    records = read_metrics(path)
-    start = None
-    for record in reversed(records):
-        if not non_finite_policy(record):
-            break
-        start = record["presentation"]
-    return start
-
-
 def critic_peak(path: Path) -> float | None:
     """The largest finite mean |v·φ| a run logged (None for a replay, which logs no policy)."""
     scales = [r.get("policy_critic_scale") for r in read_metrics(path)]
@@ -123,9 +111,8 @@ def sensitivity(folders: list[Path], overrides: list[str]) -> dict:
         for path in find_run_dirs(folder):
             run = load_run(path)
             key = next((k for k, s in wanted.items() if s == _settings(run.config)), None)
-            stopped = diverged_at(path) if run.problem is not None else None
-            if key is not None and stopped is not None:
-                diverged.setdefault(key, []).append(stopped)
+            if key is not None and run.diverged is not None:
+                diverged.setdefault(key, []).append(run.diverged["unhealthy_since"])
                 found.setdefault(key, []).append({"critic_peak": critic_peak(path)})
             elif run.problem is not None or key is None:
                 left_out.append(f"{path}: {run.problem or 'settings of no row'}")

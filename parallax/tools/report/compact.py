@@ -1,13 +1,15 @@
-"""Compacts finished runs' records for committing: each `metrics.jsonl` and `eval.json` becomes
-`metrics.jsonl.xz` / `eval.json.xz`, which every reader of the report, replay and analysis tools
-takes in place of the plain file (`parallax.tools.report.runs.read_record`).
+"""Compacts the records of runs that are over, for committing: each `metrics.jsonl` and
+`eval.json` becomes `metrics.jsonl.xz` / `eval.json.xz`, which every reader of the report,
+replay and analysis tools takes in place of the plain file
+(`parallax.tools.report.runs.read_record`).
 
     python -m parallax.tools.report.compact RUN_OR_MULTIRUN_DIR…   # what reproduce.sh runs
     python -m parallax.tools.report.compact … --format gz          # gzip instead of xz
     python -m parallax.tools.report.compact … --thin               # and only what the reports read
 
-Only finished runs are compacted (a `summary.json` beside the `config.yaml`): the trainer resumes
-an unfinished run from its plain `metrics.jsonl`. In each, the run's `metrics.jsonl` and the
+Only runs that are over are compacted: finished (a `summary.json` beside the `config.yaml`) or
+stopped by the trainer as diverged (its `diverged.json`); the trainer resumes an unfinished run
+from its plain `metrics.jsonl`. In each, the run's `metrics.jsonl` and the
 `eval.json` of the run and of the folders one level below it (`parallax-eval --out RUN/SUBDIR`).
 A plain file is removed only once its compressed copy reads back the same text; the copy keeps
 the plain file's modification time, so that "is the checkpoint newer than its eval" reads as
@@ -33,6 +35,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from parallax.health import DIVERGED_NAME
 from parallax.tools.report.runs import (
     COMPRESSED,
     METRICS_NAME,
@@ -144,17 +147,20 @@ def run_records(run: Path) -> list[Path]:
 
 
 def finished_runs(paths: Iterable[str | Path]) -> list[Path]:
-    """The finished runs (``summary.json`` beside the config) at or below each path."""
+    """The runs that are over (``summary.json`` or ``diverged.json`` beside the config) at or
+    below each path."""
     runs: list[Path] = []
     for path in paths:
-        runs += [run for run in find_run_dirs(path) if (run / SUMMARY_NAME).is_file()]
+        for run in find_run_dirs(path):
+            if (run / SUMMARY_NAME).is_file() or (run / DIVERGED_NAME).is_file():
+                runs.append(run)
     return runs
 
 
 def compact(
     paths: Iterable[str | Path], suffix: str = ".xz", thin: bool = False
 ) -> tuple[int, int, int]:
-    """Compacts every finished run at or below ``paths`` (``thin``: its metrics to the keys the
+    """Compacts every run that is over at or below ``paths`` (``thin``: its metrics to the keys the
     reports read); (runs, records compressed now, bytes saved)."""
     runs = finished_runs(paths)
     count = saved = 0
@@ -189,7 +195,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(f"[compact] error: {exc}", file=sys.stderr)
         raise SystemExit(1) from None
     print(
-        f"[compact] {runs} finished runs: {count} records compressed ({args.format}), "
+        f"[compact] {runs} runs finished or diverged: {count} records compressed ({args.format}), "
         f"{saved / 1e6:.1f} MB saved"
     )
 

@@ -9,7 +9,9 @@ depend on it.
 The numbers it reads are the paper's measures: the last-100-trial eye error of Tables 2–3 and
 the distance error per range of Tables 4–5, before and after §5's perturbation. A job directory
 with a config but no summary is a failed or unfinished job: it gets a `problem`, never an
-exception, so that the report can list it.
+exception, so that the report can list it. One the trainer stopped because its numbers stopped
+being finite is over all the same: its `problem` says so and `Run.diverged` holds the trainer's
+record of the stop (`parallax.health.DIVERGED_NAME`).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from omegaconf.errors import OmegaConfBaseException
 from yaml import YAMLError
 
 from parallax.config import perturbation_start, run_settings, upgrade_saved
+from parallax.health import DIVERGED_NAME
 from parallax.metrics import position_label
 
 SUMMARY_NAME = "summary.json"
@@ -104,6 +107,7 @@ class Run:
     evals: list[dict] = field(default_factory=list)
     overrides: list[str] = field(default_factory=list)
     problem: str | None = None  # set for failed or unfinished jobs
+    diverged: dict | None = None  # the trainer's record of a stop on non-finite numbers
 
     @property
     def flat(self) -> dict[str, Any]:
@@ -278,6 +282,17 @@ def load_run(path: Path) -> Run:
         run.problem = "failed before training started (no config.yaml from the trainer)"
         return run
     summary_path = path / SUMMARY_NAME
+    if not summary_path.is_file() and (path / DIVERGED_NAME).is_file():
+        try:
+            run.diverged = _load_json(path / DIVERGED_NAME)
+            run.problem = (
+                f"diverged: stopped at presentation {run.diverged['stopped_at']}, not finite "
+                f"since {run.diverged['unhealthy_since']} ({run.diverged['problems']})"
+            )
+        except (json.JSONDecodeError, KeyError, TypeError) as exc:
+            run.diverged = None
+            run.problem = f"unreadable {DIVERGED_NAME}: {exc!r}"
+        return run
     if not summary_path.is_file():
         run.problem = (
             f"failed or unfinished: no {SUMMARY_NAME}; {_progress(path, run.total_presentations)}"
