@@ -282,7 +282,9 @@ class Trainer:
                     log.images(self.exp.coder, pres, self.steps)
                 if self.health.must_stop:
                     stop = self.health.stop_record(self.presentation, self.saved)
-                    mark = json.dumps(stop, indent=2, allow_nan=False) + "\n"
+                    # §5's first phase, when the run got past it, is a result all the same
+                    stop["before_perturbation"] = self.before_perturbation
+                    mark = json.dumps(stop, indent=2) + "\n"
                     (self.run_dir / DIVERGED_NAME).write_text(mark)
                     message = self.health.stop_message(self.presentation, self.saved)
                     log.writer.add_text("health", message, self.steps)

@@ -67,7 +67,9 @@ def test_a_run_driven_to_overflow_stops_with_one_line_and_keeps_its_last_good_ch
     tmp_path,
 ):
     run = tmp_path / "run"
-    command = [sys.executable, "-m", "parallax.train", *DIVERGING, f"hydra.run.dir={run}"]
+    # §5's perturbation at presentation 2, before the numbers stop being finite
+    perturbed = [*DIVERGING, "perturbation.start_fraction=0.25"]
+    command = [sys.executable, "-m", "parallax.train", *perturbed, f"hydra.run.dir={run}"]
     proc = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert proc.returncode == 1, proc.stderr
     assert "Traceback" not in proc.stderr + proc.stdout
@@ -93,8 +95,11 @@ def test_a_run_driven_to_overflow_stops_with_one_line_and_keeps_its_last_good_ch
     stop = json.loads((run / DIVERGED_NAME).read_text())
     assert (stop["stopped_at"], stop["unhealthy_since"]) == (stopped_at, kept + 1)
     assert stop["last_checkpoint"] == kept and f"({stop['problems']})" in errors[0]
+    assert stop["before_perturbation"]["presentations"] == 2
     loaded = load_run(run)
     assert loaded.diverged == stop and loaded.problem.startswith("diverged: stopped at")
+    assert loaded.last_trials("before") == stop["before_perturbation"]["last_trials"]
+    assert loaded.last_trials("after") is None
     assert compact([run])[:2] == (1, 1) and (run / "metrics.jsonl.xz").is_file()
 
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator

@@ -56,10 +56,12 @@ def test_runs_go_to_the_row_of_their_settings(study, tmp_path, capsys):
 
 def _stopped_copy(study, root, name, diverged):
     """A copy of the lineage's run that stopped before its summary: killed, or (``diverged``)
-    stopped as the trainer stops one whose numbers are not finite, its last two records with an
-    infinite critic norm and the trainer's diverged.json; the first of those two presentations."""
+    stopped after the perturbation as the trainer stops one whose numbers are not finite, its
+    last two records with an infinite critic norm and the trainer's diverged.json; the first of
+    those two presentations."""
     run = root / name
     shutil.copytree(study / "lineage", run)
+    summary = json.loads((run / "summary.json").read_text())
     (run / "summary.json").unlink()
     records = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
     if diverged:
@@ -69,6 +71,8 @@ def _stopped_copy(study, root, name, diverged):
             health.check(record, skipped_total=0, fitted=False)
         assert health.must_stop
         stop = health.stop_record(records[-1]["presentation"], kept=None)
+        # the trainer's mark of a run that diverged after the perturbation
+        stop["before_perturbation"] = summary["before_perturbation"]
         (run / DIVERGED_NAME).write_text(json.dumps(stop))
     (run / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     return records[-2]["presentation"]
@@ -82,7 +86,8 @@ def test_a_run_stopped_by_non_finite_numbers_counts_as_diverged(study, tmp_path,
     result = sensitivity.main([str(root)] + [f"--override={o}" for o in SHRUNK])
     lineage = result["table"]["single_5"]["lineage"]
     assert lineage["diverged"] == [at]
-    assert lineage["eye_before"]["n"] == 1  # the diverged run has no eye figure
+    # the diverged run has figures before the perturbation, none after
+    assert lineage["eye_before"]["n"] == 2 and lineage["eye_after"]["n"] == 1
     assert lineage["critic_peak"]["n"] == 2 and lineage["critic_peak"]["mean"] > 1e30
     assert [entry.split(":")[0] for entry in result["left_out"]] == [str(root / "killed")]
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("| lineage |"))

@@ -16,7 +16,7 @@ online distance error of Tables 4–5 (total) before and after, and the critic's
 the trainer stopped because its policy's numbers were no longer finite (``train.
 stop_after_non_finite``, leaving its ``diverged.json``) is a result of its row, not a missing
 run: it is counted as diverged, at the first presentation whose numbers were not finite, and adds
-only its critic's peak.
+its critic's peak and, if it diverged after the perturbation, its figures before it.
 """
 
 from __future__ import annotations
@@ -101,8 +101,8 @@ def run_figures(run: Run) -> dict:
 
 
 def sensitivity(folders: list[Path], overrides: list[str]) -> dict:
-    """The table: {setup: {row: {cell: mean ± sd over seeds, "diverged": [presentation, …]}}},
-    and the runs left out."""
+    """The table: {setup: {row: {cell: mean ± sd over seeds, "seeds": runs counted, "diverged":
+    [presentation, …]}}}, and the runs left out."""
     wanted = row_settings(overrides)
     found: dict[tuple[str, str], list[dict]] = {}
     diverged: dict[tuple[str, str], list[int]] = {}
@@ -113,7 +113,7 @@ def sensitivity(folders: list[Path], overrides: list[str]) -> dict:
             key = next((k for k, s in wanted.items() if s == _settings(run.config)), None)
             if key is not None and run.diverged is not None:
                 diverged.setdefault(key, []).append(run.diverged["unhealthy_since"])
-                found.setdefault(key, []).append({"critic_peak": critic_peak(path)})
+                found.setdefault(key, []).append(run_figures(run))
             elif run.problem is not None or key is None:
                 left_out.append(f"{path}: {run.problem or 'settings of no row'}")
             else:
@@ -122,7 +122,8 @@ def sensitivity(folders: list[Path], overrides: list[str]) -> dict:
     order = list(ROWS)
     for (row, setup), runs in sorted(found.items(), key=lambda item: order.index(item[0][0])):
         cells = {cell: Stat.of(r.get(cell) for r in runs).as_dict() for cell in CELLS}
-        table[setup][row] = {**cells, "diverged": sorted(diverged.get((row, setup), []))}
+        stopped = sorted(diverged.get((row, setup), []))
+        table[setup][row] = {**cells, "seeds": len(runs), "diverged": stopped}
     return {"table": table, "left_out": left_out}
 
 
@@ -151,11 +152,9 @@ def format_table(result: dict) -> str:
             "|---|---|---|---|---|---|---|---|",
         ]
         for row, cells in rows.items():
-            stopped = cells["diverged"]
-            seeds = max(cells["eye_before"]["n"], cells["distance_before"]["n"]) + len(stopped)
-            where = ", ".join(f"presentation {p}" for p in stopped) or "—"
+            where = ", ".join(f"presentation {p}" for p in cells["diverged"]) or "—"
             lines.append(
-                f"| {row} | {seeds} | {where} | {_cell(cells['eye_before'], 3)} | "
+                f"| {row} | {cells['seeds']} | {where} | {_cell(cells['eye_before'], 3)} | "
                 f"{_cell(cells['eye_after'], 3)} | {_cell(cells['distance_before'], 2)} | "
                 f"{_cell(cells['distance_after'], 2)} | {_peak(cells['critic_peak'])} |"
             )

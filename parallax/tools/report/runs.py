@@ -10,8 +10,9 @@ The numbers it reads are the paper's measures: the last-100-trial eye error of T
 the distance error per range of Tables 4–5, before and after §5's perturbation. A job directory
 with a config but no summary is a failed or unfinished job: it gets a `problem`, never an
 exception, so that the report can list it. One the trainer stopped because its numbers stopped
-being finite is over all the same: its `problem` says so and `Run.diverged` holds the trainer's
-record of the stop (`parallax.health.DIVERGED_NAME`).
+being finite is over all the same: its `problem` says so, `Run.diverged` holds the trainer's
+record of the stop (`parallax.health.DIVERGED_NAME`), and its figures before the perturbation,
+if it got past it, are read as a finished run's.
 """
 
 from __future__ import annotations
@@ -133,15 +134,23 @@ class Run:
         return perturbation_start(self.config)
 
     # Tables 2–3: eye-movement error of the last trials before / after the perturbation.
-    def last_trials(self, phase: str) -> dict | None:
+    def phase_summary(self, phase: str) -> dict | None:
+        """The summary of ``phase``, before or after §5's perturbation (for a run without one,
+        "before" is its whole summary), None where the run has none: a diverged run has only
+        the one before the perturbation, if it got past it."""
         if self.summary is None:
-            return None
+            kept = (self.diverged or {}).get("before_perturbation")
+            return kept if phase == "before" else None
         before = self.summary.get("before_perturbation")
         if phase == "before":
             if before is not None:
-                return before.get("last_trials")
-            return self.summary.get("last_trials") if self.perturbation_start is None else None
-        return self.summary.get("last_trials") if before is not None else None
+                return before
+            return self.summary if self.perturbation_start is None else None
+        return self.summary if before is not None else None
+
+    def last_trials(self, phase: str) -> dict | None:
+        summary = self.phase_summary(phase)
+        return None if summary is None else summary.get("last_trials")
 
     @property
     def photograph_evals(self) -> list[dict]:
@@ -185,18 +194,8 @@ class Run:
         return fits[0] if fits else None
 
     def online_distance(self, phase: str) -> dict | None:
-        if self.summary is None:
-            return None
-        before = self.summary.get("before_perturbation")
-        if phase == "before":
-            if before is not None:
-                return before.get("distance_error") or {}
-            return (
-                (self.summary.get("distance_error") or {})
-                if self.perturbation_start is None
-                else None
-            )
-        return (self.summary.get("distance_error") or {}) if before is not None else None
+        summary = self.phase_summary(phase)
+        return None if summary is None else (summary.get("distance_error") or {})
 
 
 def _is_run_dir(path: Path) -> bool:
