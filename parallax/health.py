@@ -45,12 +45,6 @@ def _finite(value: Any) -> bool:
     return not isinstance(value, float) or math.isfinite(value)
 
 
-def non_finite_policy(record: Mapping[str, Any]) -> list[str]:
-    """The policy statistics (``policy_*``) of a presentation's record that are not finite, as
-    ``key=value``."""
-    return [f"{k}={v}" for k, v in record.items() if k.startswith("policy_") and not _finite(v)]
-
-
 class Health:
     """The checks of the module docstring, one presentation at a time, with the state a resumed
     run needs to say each thing once, as the uninterrupted run would."""
@@ -66,7 +60,9 @@ class Health:
     def problems_in(self, record: Mapping[str, Any], skipped: int, fitted: bool) -> list[str]:
         """What is not finite after the presentation of ``record``: the policy's statistics, its
         ``skipped`` updates, and the distance learner's fit when it ``fitted`` in it."""
-        found = non_finite_policy(record)
+        found = [
+            f"{k}={v}" for k, v in record.items() if k.startswith("policy_") and not _finite(v)
+        ]
         if skipped:
             found.append(f"{skipped} policy update{'s' if skipped > 1 else ''} skipped")
         if fitted:

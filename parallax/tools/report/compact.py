@@ -49,9 +49,9 @@ from parallax.tools.report.runs import (
 
 FORMATS = {"xz": ".xz", "gz": ".gz"}
 #: The keys of a metrics.jsonl line that the reports (figures, Tables 2–3's curves), the
-#: convergence, time-to-learn and collapse analyses, the continuous sweep's report and the
-#: sensitivity table (the critic's norm: the statistic that overflows first in a diverged run)
-#: read.
+#: convergence, time-to-learn and collapse analyses and the continuous sweep's report read, and
+#: the critic's norm, the statistic that overflows first in a diverged run (what its
+#: diverged.json names), so that a thinned record still shows where.
 READ_BY_REPORTS = (
     "presentation",
     "steps",
@@ -146,7 +146,7 @@ def run_records(run: Path) -> list[Path]:
     return records + eval_files(run)
 
 
-def finished_runs(paths: Iterable[str | Path]) -> list[Path]:
+def runs_over(paths: Iterable[str | Path]) -> list[Path]:
     """The runs that are over (``summary.json`` or ``diverged.json`` beside the config) at or
     below each path."""
     runs: list[Path] = []
@@ -162,7 +162,7 @@ def compact(
 ) -> tuple[int, int, int]:
     """Compacts every run that is over at or below ``paths`` (``thin``: its metrics to the keys the
     reports read); (runs, records compressed now, bytes saved)."""
-    runs = finished_runs(paths)
+    runs = runs_over(paths)
     count = saved = 0
     for run in runs:
         sizes = {}
