@@ -6,8 +6,8 @@
 # 5–10 cm only, as they change nothing at a single position), another of the AEC code's
 # step-size sets (step_sizes=NAME) or another of the dictionary rates η those sets carry
 # (dictionary_rate=NAME); the switches that change the distance learner only
-# (open_setting=plain_lm, new_network) by parallax-replay of the lineage's runs; then the table,
-# docs/results/sensitivity.md and .json. Resumable (fixed folders, like launch/reproduce.sh).
+# (open_setting=plain_lm, new_network, first_scaling) by parallax-replay of the lineage's runs;
+# then the table, docs/results/sensitivity.md and .json. Resumable (fixed folders, like launch/reproduce.sh).
 # Arguments with '=' are Hydra overrides for every run; the table is told of them.
 #     bash launch/sensitivity.sh
 set -euo pipefail
@@ -47,7 +47,7 @@ else
   done
 fi
 if (( ${#lineage[@]} )); then
-  px_run parallax-replay "${lineage[@]}" --out "$replays" open_setting=plain_lm,new_network \
+  px_run parallax-replay "${lineage[@]}" --out "$replays" open_setting=plain_lm,new_network,first_scaling \
     || status=$?
 fi
 table_overrides=()

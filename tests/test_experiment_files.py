@@ -265,7 +265,7 @@ def test_each_family_trains_and_resumes_exactly(name, tmp_path, tiny_overrides):
 
 
 #: conf/open_setting/: each file switches these settings of the paper family away from the value
-#: its lineage gives (docs/paper_algorithm.md, the sensitivity study).
+#: it uses (docs/paper_algorithm.md, the sensitivity study).
 OPEN_SETTINGS = {
     "xi_1": {"policy.discount"},
     "projection": {"policy.weight_decay", "policy.actor_projection_radius"},
@@ -273,6 +273,7 @@ OPEN_SETTINGS = {
     "reset_step_learnt": {"policy.learn_reset_step"},
     "pan_kept": {"env.pan_reset"},
     "new_network": {"distance.warm_start"},
+    "first_scaling": {"distance.keep_first_scaling"},
     "plain_lm": {
         "distance.validation_fraction",
         "distance.test_fraction",

@@ -401,7 +401,7 @@ def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
         assert f"experiment={setups} " in line
         assert "seed=0\\,1\\,2" in line and line.rstrip().endswith("train.presentations=7")
     (replay,) = [l for l in lines if l.startswith("parallax-replay ")]
-    assert replay.rstrip().endswith("open_setting=plain_lm\\,new_network")
+    assert replay.rstrip().endswith("open_setting=plain_lm\\,new_network\\,first_scaling")
     (table,) = [l for l in lines if "parallax.tools.analysis.sensitivity" in l]
     assert "--override=train.presentations=7" in table
 

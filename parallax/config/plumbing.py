@@ -141,6 +141,7 @@ ADDED_SETTINGS = {
     ("env", "motion"): "pick_and_place",
     ("env", "sweep"): dataclasses.asdict(SweepConfig()),  # unread by pick-and-place
     ("distance", "warm_start"): True,
+    ("distance", "keep_first_scaling"): False,
 }
 
 

@@ -351,6 +351,10 @@ class DistanceConfig:
     #: network does; false: from new random weights each time (a program that builds its
     #: network again before each call), for ``initial_epochs``.
     warm_start: bool = True
+    #: With a warm start, keep the [−1, 1] scaling of the first fit, as MATLAB's train does (it
+    #: configures mapminmax only on a network not yet configured); false: refit it to each fit's
+    #: queue, the weights re-expressed so that the network's function is unchanged.
+    keep_first_scaling: bool = False
     #: Filled by the trainer: the network's initialisation seed.
     seed: int = MISSING
 

@@ -9,7 +9,8 @@ warm-started Levenberg–Marquardt fit of the network (eqs. 13–15) on the weig
 Scaling: before each fit the network's [−1, 1] input/target scaling is refitted to the current
 (weighted) queue; from the second fit on, with a warm start, the weights are re-expressed so
 that the network's function is unchanged by the refit, so the warm start really starts where the
-last fit ended.
+last fit ended. With ``keep_first_scaling`` a warm fit keeps the first fit's scaling instead, as
+MATLAB's train keeps the mapminmax settings of the network it configured at its first call.
 
 μ is carried from one fit to the next (the queue changes by one sample); if a fit ended with
 μ > mu_max the next one starts again from the initial μ. The reported ``loss`` is the mean
@@ -64,6 +65,7 @@ class DistanceLearner:
         max_fail: int = DistanceConfig.max_fail,
         reset_mu: bool = DistanceConfig.reset_mu,
         warm_start: bool = DistanceConfig.warm_start,
+        keep_first_scaling: bool = DistanceConfig.keep_first_scaling,
     ) -> None:
         """The settings are distance.*'s (parallax.config checks them); ``sensitivity``, ``lm``
         and ``odometry`` may give only some of their node's settings, the others keep the
@@ -89,7 +91,7 @@ class DistanceLearner:
         self.validation_fraction = float(validation_fraction)
         self.test_fraction = float(test_fraction)
         self.max_fail, self.reset_mu = int(max_fail), bool(reset_mu)
-        self.warm_start = bool(warm_start)
+        self.warm_start, self.keep_first_scaling = bool(warm_start), bool(keep_first_scaling)
         # dividerand's draws, one permutation of the queue per fit
         self.split_generator = torch.Generator().manual_seed(int(seed) + 1)
         # the new weights of each fit without a warm start
@@ -190,7 +192,8 @@ class DistanceLearner:
         warm = self.fits > 0 and self.warm_start
         if self.fits > 0 and not self.warm_start:
             self.network.reset_parameters(self.init_generator)
-        self.network.fit_scaling(weighted, targets, preserve_function=warm)
+        if not (warm and self.keep_first_scaling):
+            self.network.fit_scaling(weighted, targets, preserve_function=warm)
         epochs = self.epochs_per_call if warm else self.initial_epochs
         fit_inputs, fit_targets, validation = weighted, targets, None
         if self.validation_fraction or self.test_fraction:

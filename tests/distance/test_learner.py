@@ -360,6 +360,22 @@ def test_without_a_warm_start_each_fit_starts_from_new_weights(warm_start):
     assert stats[-1]["epochs"] > 3 if not warm_start else stats[-1]["epochs"] <= 3
 
 
+@pytest.mark.parametrize("keep_first_scaling", [True, False])
+def test_a_warm_fit_keeps_the_first_scaling_only_when_asked(keep_first_scaling):
+    """MATLAB's train configures mapminmax on its first call only; refitting the scaling to a
+    queue whose range has grown changes it."""
+    pans, distances = paper_regression(60, np.random.default_rng(3), lateral_positions_m=SMALL_L)
+    learner = small_learner(keep_first_scaling=keep_first_scaling)
+    feed(learner, pans[:40], distances[:40])
+    assert learner.fits == 1
+    first = {name: value.clone() for name, value in learner.network.named_buffers()}
+    wider = pans[40:] * 3.0  # pans beyond the first queue's range
+    feed(learner, wider, distances[40:])
+    assert learner.fits == 21
+    kept = [torch.equal(first[name], value) for name, value in learner.network.named_buffers()]
+    assert all(kept) if keep_first_scaling else not kept[0]
+
+
 def test_new_weights_at_every_fit_resume_bit_identically():
     pans, distances = paper_regression(50, np.random.default_rng(5), lateral_positions_m=SMALL_L)
     straight = small_learner(warm_start=False)

@@ -5,9 +5,9 @@ The runs are those of ``experiment=sensitivity_<setup>`` (paper_<setup> in a sho
 with at most one switch: an open setting of ``conf/open_setting/`` (``+open_setting=xi_1``),
 another of the lineage's step-size sets (``step_sizes=chong``) or another of its dictionary
 rates η (``dictionary_rate=alex_p``); ``parallax-replay`` of the lineage's runs gives the rows
-that change the distance learner only (``plain_lm``, ``new_network``). A run belongs to the row
-whose composed config it equals, its seed and the settings that change no result aside, so that
-a run of other settings is never counted in a row.
+that change the distance learner only (``plain_lm``, ``new_network``, ``first_scaling``). A run
+belongs to the row whose composed config it equals, its seed and the settings that change no
+result aside, so that a run of other settings is never counted in a row.
 
 Each row and set-up shows, as mean ± standard deviation over the seeds: the eye's error of
 Tables 2–3 (the last-100-trial mean, averaged over L) before and after §5's perturbation, the
@@ -51,6 +51,7 @@ ROWS = {
     "η Alex P (0.5)": ["dictionary_rate=alex_p"],
     "plain LM (replay)": ["+open_setting=plain_lm"],
     "new network each fit (replay)": ["+open_setting=new_network"],
+    "first fit's scaling kept (replay)": ["+open_setting=first_scaling"],
 }
 #: Settings a run's row does not depend on: its seed, those filled at run time, and those that
 #: change no result.
