@@ -7,7 +7,8 @@
 # step-size sets (step_sizes=NAME) or another of the dictionary rates η those sets carry
 # (dictionary_rate=NAME); the switches that change the distance learner only
 # (open_setting=plain_lm, new_network, first_scaling) by parallax-replay of the lineage's runs;
-# then the table, docs/results/sensitivity.md and .json. Resumable (fixed folders, like launch/reproduce.sh).
+# then the table, docs/results/sensitivity.md and .json. Resumable (fixed folders, like
+# launch/reproduce.sh).
 # Arguments with '=' are Hydra overrides for every run; the table is told of them.
 #     bash launch/sensitivity.sh
 set -euo pipefail
@@ -47,8 +48,8 @@ else
   done
 fi
 if (( ${#lineage[@]} )); then
-  px_run parallax-replay "${lineage[@]}" --out "$replays" open_setting=plain_lm,new_network,first_scaling \
-    || status=$?
+  px_run parallax-replay "${lineage[@]}" --out "$replays" \
+    open_setting=plain_lm,new_network,first_scaling || status=$?
 fi
 table_overrides=()
 for arg in "$@"; do table_overrides+=("--override=$arg"); done
