@@ -86,3 +86,39 @@ def test_the_worst_presentation_is_the_networks_largest_error_with_the_eyes_larg
     assert row["worst_distance_m"] == DISTANCES[worst] and row["worst_error"] == 50.0
     assert row["worst_eye_miss_deg"] == pytest.approx(0.8)
     assert row["worst_eye_miss_at_cm"] == pytest.approx(laterals[1] * 100)
+
+
+def test_the_eyes_failures_are_counted_and_left_out_of_the_networks_other_error(tmp_path):
+    failed = (2, 9)  # the eye ends 1.5° and 3° off at one position of these presentations
+
+    def two_failures(perfect):
+        pans = perfect.copy()
+        pans[failed[0], 0] += 1.5
+        pans[failed[1], 1] -= 3.0
+        pans[0, 0] += 0.5  # off, but by less than the threshold
+        return pans
+
+    run = _eval_dir(tmp_path, two_failures)
+    result = json.loads((run / "eval.json").read_text())
+    errors = np.full(len(DISTANCES), 2.0)
+    errors[list(failed)] = 80.0
+    errors[0] = 4.0
+    result["distance"]["per_distance"] = {f"{d:.2f}": e for d, e in zip(DISTANCES, errors)}
+    (run / "eval.json").write_text(json.dumps(result))
+    row = eye_bound.eye_bound(run)
+    assert row["miss_deg"] == eye_bound.FAILED_MISS_DEG
+    assert row["eye_failures"] == 2 and row["network_median"] == 2.0
+    kept = np.delete(errors, list(failed))
+    assert row["network_without_failures"] == pytest.approx(kept.mean())
+    strict = eye_bound.eye_bound(run, miss_deg=0.4)  # now the 0.5° miss fails too
+    assert strict["eye_failures"] == 3
+    assert strict["network_without_failures"] == pytest.approx(2.0)
+
+
+def test_a_miss_threshold_that_is_not_positive_is_one_line_and_exit_2(tmp_path, capsys):
+    run = _eval_dir(tmp_path, lambda p: p)
+    with pytest.raises(SystemExit) as exit_:
+        eye_bound.main([str(run), "--miss", "0"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--miss" in err[0]

@@ -19,6 +19,9 @@ For each evaluation it prints the network's distance error (parallax-eval's), th
 fitted to the evaluation's own eye movements, the action grid's floor, and the network's worst
 presentation: its distance, its error there, and how far the eye ended from α* at the lateral
 position where it missed most (one presentation whose eye stops short can carry a model's mean).
+Beside them, what the eye's failures carry of the network's error: its median over the
+presentations, how many presentations the eye ended more than ``--miss`` degrees from α* at some
+lateral position, and the network's mean error over the others.
 """
 
 from __future__ import annotations
@@ -38,6 +41,10 @@ from parallax.distance.metrics import distance_error_by_range
 from parallax.parts import distance_learner
 from parallax.tools.analysis.baselines import target_pans
 from parallax.tools.report.runs import EVAL_NAME, read_record, record_file
+
+#: An eye that ends a presentation this far (degrees) from α* at some lateral position has failed
+#: to pursue there: about five times the paper's Table 2 errors at 5–13 cm.
+FAILED_MISS_DEG = 1.0
 
 
 def position_line_estimates(train_pans, train_distances, pans) -> np.ndarray:
@@ -99,9 +106,10 @@ def action_grid_step(actions) -> float:
     return reduce(math.gcd, thousandths) / 1000.0
 
 
-def eye_bound(eval_dir: str | Path) -> dict:
-    """The network's error, the two learners' fitted to the same eye movements, and the action
-    grid's floor (module docstring) for the evaluation in ``eval_dir``."""
+def eye_bound(eval_dir: str | Path, miss_deg: float = FAILED_MISS_DEG) -> dict:
+    """The network's error, the two learners' fitted to the same eye movements, the action grid's
+    floor and what the eye's failures (a miss over ``miss_deg``) carry of the network's error
+    (module docstring) for the evaluation in ``eval_dir``."""
     path = Path(eval_dir) / EVAL_NAME  # or its compressed form
     if record_file(path) is None:
         raise FileNotFoundError(f"{eval_dir} holds no eval.json (run parallax-eval first)")
@@ -118,6 +126,7 @@ def eye_bound(eval_dir: str | Path) -> dict:
     rounded = np.round(perfect / step) * step
     network = result.get("distance", {}).get("by_range", {}).get("total", math.nan)
     worst = worst_presentation(result, pans, distances, perfect, laterals)
+    failures = eye_failures(result, pans, distances, perfect, miss_deg)
 
     def error(estimates: np.ndarray) -> float:
         return distance_error_by_range(estimates, distances)["total"]
@@ -132,6 +141,30 @@ def eye_bound(eval_dir: str | Path) -> dict:
         "action_grid_step_deg": step,
         "floor": error(leave_one_out(rounded, distances)),
         **worst,
+        **failures,
+    }
+
+
+def eye_failures(result: dict, pans, distances, perfect, miss_deg: float) -> dict:
+    """The network's median error over the grid's presentations, how many presentations the eye
+    ended more than ``miss_deg`` from α* at some lateral position, and the network's mean error
+    over the other presentations (parallax-eval's per-distance errors: one presentation each
+    unless told otherwise)."""
+    per_distance = result.get("distance", {}).get("per_distance", {})
+    if not per_distance:
+        return {
+            "miss_deg": miss_deg,
+            "network_median": math.nan,
+            "eye_failures": 0,
+            "network_without_failures": math.nan,
+        }
+    errors = np.array([per_distance[f"{d:.2f}"] for d in distances])
+    failed = np.abs(np.asarray(pans) - perfect).max(axis=1) > miss_deg
+    return {
+        "miss_deg": miss_deg,
+        "network_median": float(np.median(errors)),
+        "eye_failures": int(failed.sum()),
+        "network_without_failures": float(errors[~failed].mean()) if (~failed).any() else math.nan,
     }
 
 
@@ -166,24 +199,38 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("evals", nargs="+", metavar="EVAL_DIR", help="folders with an eval.json")
     parser.add_argument("--json", default=None, help="also write the rows to this JSON file")
+    parser.add_argument(
+        "--miss",
+        type=float,
+        default=FAILED_MISS_DEG,
+        metavar="DEG",
+        help="a presentation whose eye ends this far from α* at some position has failed "
+        f"(default {FAILED_MISS_DEG:g})",
+    )
     args = parser.parse_args(argv)
+    if not args.miss > 0:
+        print(f"eye_bound: error: --miss must be positive, got {args.miss:g}", file=sys.stderr)
+        sys.exit(2)
     try:
-        rows = [eye_bound(folder) for folder in args.evals]
+        rows = [eye_bound(folder, args.miss) for folder in args.evals]
     except (FileNotFoundError, ValueError, KeyError) as exc:
         print(f"eye_bound: error: {exc}", file=sys.stderr)
         sys.exit(2)
     print(
         "| evaluation | trials | network as trained (%) | network fitted to this eye (%) | "
         "lines fitted to this eye (%) | action grid floor (%) | worst presentation: distance, "
-        "network's error, the eye's largest miss |"
+        "network's error, the eye's largest miss | network's median (%) | "
+        f"eye off by more than {args.miss:g}° | network on the others (%) |"
     )
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for row in rows:
         print(
             f"| {row['eval']} | {row['trials']} | {row['network']:.2f} | "
             f"{row['network_on_this_eye']:.2f} | {row['lines_on_this_eye']:.2f} | "
             f"{row['floor']:.2f} | {row['worst_distance_m']:.2f} m, {row['worst_error']:.1f} %, "
-            f"{row['worst_eye_miss_deg']:.2f}° at {row['worst_eye_miss_at_cm']:g} cm |"
+            f"{row['worst_eye_miss_deg']:.2f}° at {row['worst_eye_miss_at_cm']:g} cm | "
+            f"{row['network_median']:.2f} | {row['eye_failures']} | "
+            f"{row['network_without_failures']:.2f} |"
         )
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
