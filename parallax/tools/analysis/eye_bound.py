@@ -43,7 +43,7 @@ from parallax.tools.analysis.baselines import target_pans
 from parallax.tools.report.runs import EVAL_NAME, read_record, record_file
 
 #: An eye that ends a presentation this far (degrees) from α* at some lateral position has failed
-#: to pursue there: about five times the paper's Table 2 errors at 5–13 cm.
+#: to pursue there: four to six times the paper's Table 2 errors at 5–13 cm (0.16–0.25°).
 FAILED_MISS_DEG = 1.0
 
 
