@@ -125,8 +125,9 @@ def eye_bound(eval_dir: str | Path, miss_deg: float = FAILED_MISS_DEG) -> dict:
     perfect = perfect_pans(laterals, tuple(float(d) for d in distances))
     rounded = np.round(perfect / step) * step
     network = result.get("distance", {}).get("by_range", {}).get("total", math.nan)
-    worst = worst_presentation(result, pans, distances, perfect, laterals)
-    failures = eye_failures(result, pans, distances, perfect, miss_deg)
+    errors = network_errors(result, distances)
+    worst = worst_presentation(errors, pans, distances, perfect, laterals)
+    failures = eye_failures(errors, pans, perfect, miss_deg)
 
     def error(estimates: np.ndarray) -> float:
         return distance_error_by_range(estimates, distances)["total"]
@@ -145,20 +146,26 @@ def eye_bound(eval_dir: str | Path, miss_deg: float = FAILED_MISS_DEG) -> dict:
     }
 
 
-def eye_failures(result: dict, pans, distances, perfect, miss_deg: float) -> dict:
-    """The network's median error over the grid's presentations, how many presentations the eye
-    ended more than ``miss_deg`` from α* at some lateral position, and the network's mean error
-    over the other presentations (parallax-eval's per-distance errors: one presentation each
-    unless told otherwise)."""
+def network_errors(result: dict, distances) -> np.ndarray | None:
+    """parallax-eval's per-distance errors of the network (%) in the order of ``distances``
+    (one presentation each unless told otherwise); None when the evaluation has none."""
     per_distance = result.get("distance", {}).get("per_distance", {})
     if not per_distance:
+        return None
+    return np.array([per_distance[f"{d:.2f}"] for d in distances])
+
+
+def eye_failures(errors: np.ndarray | None, pans, perfect, miss_deg: float) -> dict:
+    """The network's median error over the grid's presentations, how many presentations the eye
+    ended more than ``miss_deg`` from α* at some lateral position, and the network's mean error
+    over the other presentations."""
+    if errors is None:
         return {
             "miss_deg": miss_deg,
             "network_median": math.nan,
             "eye_failures": 0,
             "network_without_failures": math.nan,
         }
-    errors = np.array([per_distance[f"{d:.2f}"] for d in distances])
     failed = np.abs(np.asarray(pans) - perfect).max(axis=1) > miss_deg
     return {
         "miss_deg": miss_deg,
@@ -168,20 +175,18 @@ def eye_failures(result: dict, pans, distances, perfect, miss_deg: float) -> dic
     }
 
 
-def worst_presentation(result: dict, pans, distances, perfect, laterals) -> dict:
+def worst_presentation(errors: np.ndarray | None, pans, distances, perfect, laterals) -> dict:
     """The grid distance the network judged worst (parallax-eval's error there, the mean over its
     textures) and the eye's largest miss |q_p − α*_p| (degrees) on the first presentation at that
     distance, with its lateral position (cm). parallax-eval shows one texture per distance
     unless told otherwise, so the presentation is then the worst one."""
-    per_distance = result.get("distance", {}).get("per_distance", {})
-    if not per_distance:
+    if errors is None:
         return {
             "worst_distance_m": math.nan,
             "worst_error": math.nan,
             "worst_eye_miss_deg": math.nan,
             "worst_eye_miss_at_cm": math.nan,
         }
-    errors = np.array([per_distance[f"{d:.2f}"] for d in distances])
     row = int(np.argmax(errors))
     misses = np.abs(pans[row] - perfect[row])
     column = int(np.argmax(misses))
