@@ -5,8 +5,8 @@
 #   3. the speed curve (seed 0): env.sweep.speed_m up to the fastest the eye can follow at
 #      3 m, each run about 64,640 iterations long (train.presentations = 64,640 / T);
 #   4. parallax-eval of every model on the held-out photographs, as the recipe's are evaluated;
-#   5. the records compacted (the speed runs' thinned to what the report reads), and the
-#      report, docs/results/continuous.md and .json (python -m
+#   5. the records compacted (keeping what replays read; the speed runs' only what the report
+#      reads), and the report, docs/results/continuous.md and .json (python -m
 #      parallax.tools.report.continuous), beside the recipe's pick-and-place 5–20 cm runs.
 # Resumable (fixed folders, like launch/reproduce.sh). Arguments with '=' are Hydra overrides
 # for every run.
@@ -37,9 +37,10 @@ while IFS= read -r -d '' summary; do
     px_run parallax-eval "$run" "${eval_args[@]}" || status=$?
   fi
 done < <(find "$runs" "$pairing" "$speeds" -name summary.json -not -path '*/.*' -print0 2>/dev/null)
-# the records as they are committed; the speed runs', which nothing replays, thinned
-px_run python -m parallax.tools.report.compact "$runs" "$pairing" || status=$?
-px_run python -m parallax.tools.report.compact --thin "$speeds" || status=$?
+# the records as they are committed, keeping what parallax-replay and the report read; the speed
+# runs', which nothing replays, only what the report reads
+px_run python -m parallax.tools.report.compact --keep replay "$runs" "$pairing" || status=$?
+px_run python -m parallax.tools.report.compact --keep reports "$speeds" || status=$?
 px_run python -m parallax.tools.report.continuous "$runs" --pairing "$pairing" \
   --speeds "$speeds" --recipe "$(px_record_dir recipe)" \
   --json "$report_root/continuous.json" --markdown "$report_root/continuous.md" || status=$?

@@ -258,11 +258,12 @@ for family in "${families[@]}"; do
     continue
   fi
   # the records as they are committed: the finished runs' metrics.jsonl and eval.json compressed,
-  # the single positions' (which nothing replays) thinned to what the reports read
-  px_run python -m parallax.tools.report.compact "${sources[@]}" || status=$?
+  # keeping what parallax-replay and the reports read; the single positions' (which nothing
+  # replays) only what the reports read
+  px_run python -m parallax.tools.report.compact --keep replay "${sources[@]}" || status=$?
   singles=("$sweep"/*single_*)
   if [[ -e "${singles[0]}" ]]; then
-    px_run python -m parallax.tools.report.compact --thin "${singles[@]}" || status=$?
+    px_run python -m parallax.tools.report.compact --keep reports "${singles[@]}" || status=$?
   fi
   if [[ "$family" == without ]]; then
     px_run python -m parallax.tools.report.leave_one_out "${sources[@]}" \

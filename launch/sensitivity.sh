@@ -7,8 +7,9 @@
 # step-size sets (step_sizes=NAME) or another of the dictionary rates η those sets carry
 # (dictionary_rate=NAME); the switches that change the distance learner only
 # (open_setting=plain_lm, new_network, first_scaling) by parallax-replay of the lineage's runs;
-# then the table, docs/results/sensitivity.md and .json. Resumable (fixed folders, like
-# launch/reproduce.sh).
+# the records compacted as committed (the lineage's keep what the replays read, the switches' what
+# the table reads); then the table, docs/results/sensitivity.md and .json. Resumable (fixed
+# folders, like launch/reproduce.sh).
 # Arguments with '=' are Hydra overrides for every run; the table is told of them.
 #     bash launch/sensitivity.sh
 set -euo pipefail
@@ -37,17 +38,26 @@ for rate in origin lukas alex_p; do
 done
 # the lineage's runs: those launched with neither switch
 lineage=()
+switched=()
 if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
   lineage=("$sweep/<runs of the lineage's settings>")
+  switched=("$sweep/<runs with a switch>")
 else
   for overrides in "$sweep"/*/.hydra/overrides.yaml; do
     [[ -f "$overrides" ]] || continue
-    if ! grep -qE -- '^- (\+open_setting|step_sizes|dictionary_rate)=' "$overrides"; then
-      lineage+=("$(dirname "$(dirname "$overrides")")")
+    run="$(dirname "$(dirname "$overrides")")"
+    if grep -qE -- '^- (\+open_setting|step_sizes|dictionary_rate)=' "$overrides"; then
+      switched+=("$run")
+    else
+      lineage+=("$run")
     fi
   done
 fi
+if (( ${#switched[@]} )); then
+  px_run python -m parallax.tools.report.compact --keep reports "${switched[@]}" || status=$?
+fi
 if (( ${#lineage[@]} )); then
+  px_run python -m parallax.tools.report.compact --keep replay "${lineage[@]}" || status=$?
   px_run parallax-replay "${lineage[@]}" --out "$replays" \
     open_setting=plain_lm,new_network,first_scaling || status=$?
 fi

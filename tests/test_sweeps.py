@@ -402,6 +402,12 @@ def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
         assert "seed=0\\,1\\,2" in line and line.rstrip().endswith("train.presentations=7")
     (replay,) = [l for l in lines if l.startswith("parallax-replay ")]
     assert replay.rstrip().endswith("open_setting=plain_lm\\,new_network\\,first_scaling")
+    # the records as committed: the switches' thinned to what the table reads, the lineage's
+    # keeping the eye-movement vectors that its replays (just after) read
+    compacted = [l for l in lines if "parallax.tools.report.compact" in l]
+    assert [l.split()[3:5] for l in compacted] == [["--keep", "reports"], ["--keep", "replay"]]
+    assert "switch" in compacted[0] and "lineage" in compacted[1]
+    assert lines.index(compacted[1]) < lines.index(replay)
     (table,) = [l for l in lines if "parallax.tools.analysis.sensitivity" in l]
     assert "--override=train.presentations=7" in table
 

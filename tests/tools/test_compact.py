@@ -130,7 +130,7 @@ def test_thinning_keeps_what_the_reports_read_and_drops_the_vectors(tmp_path):
     assert all(set(line) <= set(READ_BY_REPORTS) for line in before)
     with_vectors = [{**line, "pans": [[0.1, 0.2]], "lm_loss": 0.5} for line in before]
     (runs[0] / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in with_vectors))
-    compact([runs[0]], thin=True)
+    compact([runs[0]], keep="reports")
     assert not (runs[0] / "metrics.jsonl").exists()  # compressed, as without thinning
     thinned = read_metrics(runs[0])
     assert [line.keys() for line in thinned] == [line.keys() for line in before]
@@ -138,7 +138,7 @@ def test_thinning_keeps_what_the_reports_read_and_drops_the_vectors(tmp_path):
     for kept, line in zip(thinned, before, strict=True):
         assert kept["mae"] == pytest.approx(line["mae"], rel=5e-7)
         assert len(repr(kept["mae"]).lstrip("0.").replace(".", "")) <= 7
-    compact([runs[0]], thin=True)  # a thinned record thins to itself
+    compact([runs[0]], keep="reports")  # a thinned record thins to itself
     assert read_metrics(runs[0]) == thinned
 
 
@@ -153,3 +153,12 @@ def test_rounding_reaches_the_numbers_inside_lists_and_dicts():
         "name": "x",
         "none": None,
     }
+
+
+def test_keep_names_what_it_may_keep(tmp_path, capsys):
+    with pytest.raises(ValueError, match="keep must be one of all, replay, reports, got 'some'"):
+        compact([tmp_path], keep="some")
+    with pytest.raises(SystemExit) as exc:
+        main([str(tmp_path), "--keep", "some"])
+    assert exc.value.code == 2
+    assert "invalid choice: 'some'" in capsys.readouterr().err

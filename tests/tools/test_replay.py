@@ -323,3 +323,32 @@ def test_an_open_setting_of_the_distance_learner_replays_as_its_files_settings()
         parse_sweep(["open_setting=xi_1"])
     with pytest.raises(ReplayError, match="no conf/open_setting/nothing.yaml"):
         parse_sweep(["+open_setting=nothing"])
+
+
+def test_a_record_kept_for_replay_replays_bit_identically(perturbed_run, tmp_path):
+    """`compact --keep replay` drops what neither the replays nor the reports read and rounds the
+    rest, but keeps s and the distances exact: every replay of it is the whole record's."""
+    import shutil
+
+    from parallax.tools.analysis.network_calls import network_calls
+    from parallax.tools.report.compact import compact
+    from parallax.tools.report.runs import read_metrics
+
+    kept = tmp_path / perturbed_run.name
+    shutil.copytree(perturbed_run, kept)
+    assert compact([kept], keep="replay")[:2] == (1, 1)
+    whole, lines = read_metrics(perturbed_run), read_metrics(kept)
+    assert set(lines[0]) < set(whole[0]) and "reward" not in lines[0]
+    assert [line["pans"] for line in lines] == [line["pans"] for line in whole]
+    for overrides in ([], ["train.distance_readout=best_reward"], ["distance.queue_size=4"]):
+        a, b = replay(perturbed_run, overrides)["summary"], replay(kept, overrides)["summary"]
+        assert json.dumps(b["distance_error"]) == json.dumps(a["distance_error"]), overrides
+        assert json.dumps(b["before_perturbation"]) == json.dumps(a["before_perturbation"])
+    # the fit statistics stay, so the network's calls read the same (the errors to 7 digits)
+    for block, whole_block in zip(network_calls(kept), network_calls(perturbed_run), strict=True):
+        error = pytest.approx(whole_block["distance_error"], rel=5e-7)
+        assert block == {**whole_block, "distance_error": error}
+    # thinned to what the reports read, the record has no s left to replay
+    compact([kept], keep="reports")
+    with pytest.raises(ReplayError, match="no eye-movement vectors"):
+        replay(kept)

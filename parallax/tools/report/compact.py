@@ -5,7 +5,8 @@ replay and analysis tools takes in place of the plain file
 
     python -m parallax.tools.report.compact RUN_OR_MULTIRUN_DIR…   # what reproduce.sh runs
     python -m parallax.tools.report.compact … --format gz          # gzip instead of xz
-    python -m parallax.tools.report.compact … --thin               # and only what the reports read
+    python -m parallax.tools.report.compact … --keep replay        # what replays and reports read
+    python -m parallax.tools.report.compact … --keep reports       # only what the reports read
 
 Only runs that are over are compacted: finished (a `summary.json` beside the `config.yaml`) or
 stopped by the trainer as diverged (its `diverged.json`); the trainer resumes an unfinished run
@@ -16,11 +17,13 @@ the plain file's modification time, so that "is the checkpoint newer than its ev
 before. The output is deterministic (xz has no time stamp; gzip's is 0 and it names no file): the
 same record always compresses to the same bytes. A record already compressed in the other format
 is converted; figures and everything else are left alone (docs/results/runs/.gitignore keeps the
-runs' figures out of git). ``--thin`` also keeps, of each line of metrics.jsonl, only the keys in
-READ_BY_REPORTS: what the reports, the figures and the analysis tools read of a run that nothing
-replays (a single position, a speed of the continuous sweep); the eye-movement vectors that
-parallax-replay needs go, and each number is kept to SIGNIFICANT_DIGITS, which halves what is
-left (the reports print three or four).
+runs' figures out of git). ``--keep`` chooses what of each line of metrics.jsonl stays:
+``all`` (the default) every key; ``replay`` the keys in READ_BY_REPORTS and the distance
+learner's fit statistics (lm_*), each number kept to SIGNIFICANT_DIGITS, and the keys in REPLAYED
+exactly, so that parallax-replay of the kept record is bit-identical to that of the whole one;
+``reports`` only the READ_BY_REPORTS keys, rounded: what the reports, the figures and the
+analysis tools read of a run that nothing replays (a single position, a speed of the continuous
+sweep). Rounding halves what is left (the reports print three or four digits).
 """
 
 from __future__ import annotations
@@ -71,6 +74,22 @@ READ_BY_REPORTS = (
     "retinal_slip_deg",
 )
 
+#: What parallax-replay re-runs the distance learner on: which presentations it learnt from, the
+#: distances and the eye-movement vectors s (each trial's last and best-encoded pan). Kept exact.
+REPLAYED = (
+    "presentation",
+    "perturbed",
+    "learnt_distance",
+    "route",
+    "distances",
+    "pans",
+    "best_pans",
+)
+#: The prefix of the distance learner's fit statistics, which network_calls reads.
+FIT_PREFIX = "lm_"
+#: What ``--keep`` may name, from the most kept to the least.
+KEEPS = ("all", "replay", "reports")
+
 #: Digits a thinned record keeps of each number: the reports print three or four, so a relative
 #: change of at most 5e-7 moves none of them (the 17 a float64 prints double the file).
 SIGNIFICANT_DIGITS = 7
@@ -87,14 +106,21 @@ def rounded(value: Any) -> Any:
     return value
 
 
-def thin_metrics(run: Path) -> None:
-    """Rewrites ``run``'s metrics.jsonl (plain) with only the READ_BY_REPORTS keys of each line,
-    each number rounded to SIGNIFICANT_DIGITS."""
+def kept_line(line: dict[str, Any], keep: str) -> dict[str, Any]:
+    """What ``--keep replay`` or ``--keep reports`` keeps of one metrics.jsonl line."""
+    if keep == "reports":
+        return {k: rounded(v) for k, v in line.items() if k in READ_BY_REPORTS}
+    return {
+        k: v if k in REPLAYED else rounded(v)
+        for k, v in line.items()
+        if k in REPLAYED or k in READ_BY_REPORTS or k.startswith(FIT_PREFIX)
+    }
+
+
+def thin_metrics(run: Path, keep: str) -> None:
+    """Rewrites ``run``'s metrics.jsonl (plain) with what ``keep`` keeps of each line."""
     lines = read_record(run / METRICS_NAME).splitlines()
-    kept = [
-        json.dumps({k: rounded(v) for k, v in json.loads(line).items() if k in READ_BY_REPORTS})
-        for line in lines
-    ]
+    kept = [json.dumps(kept_line(json.loads(line), keep)) for line in lines]
     partial = run / (METRICS_NAME + ".tmp")
     partial.write_text("\n".join(kept) + "\n", encoding="utf-8")
     partial.replace(run / METRICS_NAME)  # the plain file wins over a compressed one
@@ -158,18 +184,20 @@ def runs_over(paths: Iterable[str | Path]) -> list[Path]:
 
 
 def compact(
-    paths: Iterable[str | Path], suffix: str = ".xz", thin: bool = False
+    paths: Iterable[str | Path], suffix: str = ".xz", keep: str = "all"
 ) -> tuple[int, int, int]:
-    """Compacts every run that is over at or below ``paths`` (``thin``: its metrics to the keys the
-    reports read); (runs, records compressed now, bytes saved)."""
+    """Compacts every run that is over at or below ``paths``, its metrics to what ``keep`` (one of
+    KEEPS) keeps; (runs, records compressed now, bytes saved)."""
+    if keep not in KEEPS:
+        raise ValueError(f"keep must be one of {', '.join(KEEPS)}, got {keep!r}")
     runs = runs_over(paths)
     count = saved = 0
     for run in runs:
         sizes = {}
         metrics = record_file(run / METRICS_NAME)
-        if thin and metrics is not None:
+        if keep != "all" and metrics is not None:
             sizes[run / METRICS_NAME] = metrics.stat().st_size
-            thin_metrics(run)
+            thin_metrics(run, keep)
         for record in run_records(run):
             before = record_file(record)
             if before is None or before.name.endswith(suffix):
@@ -187,10 +215,15 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("paths", nargs="+", metavar="RUN_OR_MULTIRUN_DIR")
     parser.add_argument("--format", choices=sorted(FORMATS), default="xz")
-    parser.add_argument("--thin", action="store_true", help="keep only what the reports read")
+    parser.add_argument(
+        "--keep",
+        choices=KEEPS,
+        default="all",
+        help="of each metrics line: every key, what replays and reports read, or what reports read",
+    )
     args = parser.parse_args(argv)
     try:
-        runs, count, saved = compact(args.paths, FORMATS[args.format], args.thin)
+        runs, count, saved = compact(args.paths, FORMATS[args.format], args.keep)
     except (ReportError, OSError) as exc:
         print(f"[compact] error: {exc}", file=sys.stderr)
         raise SystemExit(1) from None
