@@ -27,6 +27,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from parallax import checkpoint
+from parallax.compressed import COMPRESSED, read_record, record_file
 from parallax.config import (
     READOUT_PANS,
     RUN_CONFIG_NAME,
@@ -150,13 +151,17 @@ class Trainer:
         self.last_distance_stats = state["last_distance_stats"]
         checkpoint.set_global_rng_state(state["global_rng"])
         self.keep_latest, self.saved = path == self.checkpoint_path, (path, self.presentation)
-        if self.metrics_path.exists():
+        found = record_file(self.metrics_path)
+        if found is not None:
             kept = [
                 line
-                for line in self.metrics_path.read_text().splitlines()
+                for line in read_record(self.metrics_path).splitlines()
                 if _presentation_of(line) <= self.presentation
             ]
             self.metrics_path.write_text("".join(line + "\n" for line in kept))
+            # a compacted record goes on as the plain file the log appends to
+            if found != self.metrics_path:
+                found.unlink()
         return True
 
     # --- one presentation ------------------------------------------------------------------
@@ -307,6 +312,8 @@ class Trainer:
         (self.run_dir / DIVERGED_NAME).unlink(missing_ok=True)
         if not resumed:  # a start from scratch: no lines of an earlier start without a checkpoint
             self.metrics_path.write_text("")
+            for suffix in COMPRESSED:  # nor of a compacted record
+                self.metrics_path.with_name(self.metrics_path.name + suffix).unlink(missing_ok=True)
         config = OmegaConf.to_yaml(self.cfg, resolve=True)
         (self.run_dir / RUN_CONFIG_NAME).write_text(config)
         if self.perturbed:

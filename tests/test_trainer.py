@@ -191,6 +191,26 @@ def test_resume_drops_a_torn_log_line(tmp_path, tiny_overrides):
     ).read_text()
 
 
+def test_a_compacted_run_goes_on_from_its_compressed_log(tmp_path, tiny_overrides):
+    from parallax.tools.report.compact import compact
+
+    full = (_train(tmp_path / "full", tiny_overrides), tmp_path / "full" / "metrics.jsonl")
+    part = tmp_path / "part"
+    _train(part, tiny_overrides + ["train.presentations=4"])
+    assert compact([part])[:2] == (1, 1)  # a finished run, committed compressed
+    # lengthened: the log goes on from the compressed lines, as one plain file
+    _train(part, tiny_overrides)
+    assert not (part / "metrics.jsonl.xz").exists()
+    assert (part / "metrics.jsonl").read_text() == full[1].read_text()
+    # without its checkpoints (as committed), a new start keeps none of the compressed lines
+    compact([part])
+    for saved in part.glob("*.pt"):
+        saved.unlink()
+    assert _without_timing(_train(part, tiny_overrides)) == _without_timing(full[0])
+    assert not (part / "metrics.jsonl.xz").exists()
+    assert (part / "metrics.jsonl").read_text() == full[1].read_text()
+
+
 def test_a_start_without_a_checkpoint_keeps_no_earlier_log_lines(tmp_path, tiny_overrides):
     # a run stopped before its first checkpoint leaves lines but nothing to resume from
     _train(tmp_path / "full", tiny_overrides)

@@ -38,16 +38,14 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from parallax.compressed import COMPRESSED, read_record, record_file
 from parallax.health import DIVERGED_NAME
 from parallax.tools.report.runs import (
-    COMPRESSED,
     METRICS_NAME,
     SUMMARY_NAME,
     ReportError,
     eval_files,
     find_run_dirs,
-    read_record,
-    record_file,
 )
 
 FORMATS = {"xz": ".xz", "gz": ".gz"}

@@ -17,9 +17,7 @@ if it got past it, are read as a finished run's.
 
 from __future__ import annotations
 
-import gzip
 import json
-import lzma
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +27,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 from yaml import YAMLError
 
+from parallax.compressed import read_record, record_file
 from parallax.config import perturbation_start, run_settings, upgrade_saved
 from parallax.health import DIVERGED_NAME
 from parallax.metrics import position_label
@@ -39,35 +38,6 @@ METRICS_NAME = "metrics.jsonl"
 RUN_CONFIG_NAME = "config.yaml"
 HYDRA_CONFIG = Path(".hydra") / "config.yaml"
 HYDRA_OVERRIDES = Path(".hydra") / "overrides.yaml"
-
-
-#: The compressed forms of a record a reader takes, by suffix, in the order they are looked for.
-COMPRESSED = {".xz": lzma.open, ".gz": gzip.open}
-
-
-def record_file(path: Path | str) -> Path | None:
-    """The file that holds the record ``path`` (say RUN/metrics.jsonl): the plain file, else its
-    compressed form (``metrics.jsonl.xz`` or ``.gz``), else None. The plain file wins: the tools
-    write plain files, so one beside a compressed copy is the newer record."""
-    path = Path(path)
-    for suffix in ("", *COMPRESSED):
-        candidate = path.with_name(path.name + suffix)
-        if candidate.is_file():
-            return candidate
-    return None
-
-
-def read_record(path: Path | str) -> str:
-    """The text of the record ``path``, plain or compressed (:func:`record_file`); a
-    FileNotFoundError naming ``path`` when there is neither."""
-    found = record_file(path)
-    if found is None:
-        raise FileNotFoundError(f"{path}: no such file, plain or compressed")
-    opener = COMPRESSED.get(found.suffix)
-    if opener is None:
-        return found.read_text()
-    with opener(found, "rt", encoding="utf-8") as handle:
-        return handle.read()
 
 
 class ReportError(ValueError):
