@@ -108,12 +108,14 @@ def curve(run_dir: Path, prices: Sequence[float]) -> dict:
     }
 
 
+def spread(values: list[float], digits: int = 2) -> str:
+    """Mean ± sd over runs ('± 0.00' for one run, so that the columns line up)."""
+    sd = statistics.stdev(values) if len(values) > 1 else 0.0
+    return f"{statistics.fmean(values):.{digits}f} ± {sd:.{digits}f}"
+
+
 def table(results: list[dict]) -> str:
     """Mean ± sd over runs: error, eye movements and travel per presentation at each price."""
-
-    def spread(values: list[float], digits: int = 2) -> str:
-        sd = statistics.stdev(values) if len(values) > 1 else 0.0
-        return f"{statistics.fmean(values):.{digits}f} ± {sd:.{digits}f}"
 
     trials = sorted({r["trials"] for r in results})
     lines = [
@@ -177,10 +179,6 @@ def _eye(run_dir: Path, evaluation: dict) -> dict:
 
 def trained_table(planned: list[dict], sweeping: list[dict]) -> str:
     """The trained planners' routes, and their eye per position beside the sweeping runs'."""
-
-    def spread(values: list[float], digits: int = 2) -> str:
-        sd = statistics.stdev(values) if len(values) > 1 else 0.0
-        return f"{statistics.fmean(values):.{digits}f} ± {sd:.{digits}f}"
 
     lines = [
         "| price per trial | runs | held-out presentations | distance error (%) | "

@@ -31,6 +31,7 @@ import numpy as np
 from parallax.config import load_run_config
 from parallax.envs.sweep import fastest_target_pan_deg, sweep_iterations
 from parallax.tools.analysis.continuous import analyse, eye_error_parts
+from parallax.tools.report.groups import Stat
 from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, read_record, record_file
 from parallax.writable import file_problem
 
@@ -64,15 +65,13 @@ def _online_motion(run: Path) -> dict[str, float]:
 
 
 def _spread(values) -> dict:
-    values = [float(v) for v in values]
-    sd = float(np.std(values, ddof=1)) if len(values) > 1 else math.nan
-    return {"mean": float(np.mean(values)), "sd": sd, "n": len(values)}
+    """Mean, sd and count over seeds, as the paper tables' cells are stored."""
+    return Stat.of(values).as_dict()
 
 
 def _text(cell: dict, digits: int = 2) -> str:
-    if cell["n"] == 1 or math.isnan(cell["sd"]):
-        return f"{cell['mean']:.{digits}f}"
-    return f"{cell['mean']:.{digits}f} ± {cell['sd']:.{digits}f}"
+    """A stored cell as the tables print it: '0.21 ± 0.03', the mean alone for one seed."""
+    return Stat.from_dict(cell).text(digits)
 
 
 def _iterations(cfg) -> int:
