@@ -23,6 +23,7 @@ from parallax.metrics import position_label
 from parallax.tools.report import paper_results as paper
 from parallax.tools.report.build import build_report
 from parallax.tools.report.cli import main
+from parallax.tools.report.tables import weighting_verdict
 
 RANGES = paper.DISTANCE_RANGES
 
@@ -202,10 +203,8 @@ def test_paper_tables_put_ours_beside_the_published_numbers(paper_sweep, tmp_pat
         s["before_perturbation"]["distance_error"]["total"] for s in summaries["paper_multi_5_20"]
     ]
     assert unweighted[6].startswith(cell_text(online)) and "online" in unweighted[-1]
-    verdict = (
-        "better than"
-        if statistics.fmean([e["total"] for e in weighted_online]) < statistics.fmean(online)
-        else "not better than"
+    verdict = weighting_verdict(
+        statistics.fmean([e["total"] for e in weighted_online]), statistics.fmean(online)
     )
     assert f"is {verdict} without weighting" in markdown
 
@@ -403,3 +402,10 @@ def test_paper_results_are_the_papers_tables():
             assert [float(x) for x in re.findall(r"([\d.]+)%", line)] == [
                 published[r] for r in RANGES
             ]
+
+
+def test_the_weighting_verdict_reads_the_totals_as_printed():
+    assert weighting_verdict(1.881, 1.62) == "not better than"
+    assert weighting_verdict(1.5, 1.62) == "better than"
+    # equal at the two decimals printed (the weighting undone by the network's input scaling)
+    assert weighting_verdict(12.7200000001, 12.72) == "the same as"

@@ -183,12 +183,20 @@ def distance_table(selection: PaperSelection, phase: str) -> tuple[str, dict]:
     ]
     weighted, unweighted = totals.get(paper.WEIGHTING_5_20), totals.get(paper.NO_WEIGHTING_5_20)
     if weighted and unweighted and weighted.n and unweighted.n:
-        verdict = "better than" if weighted.mean < unweighted.mean else "not better than"
         lines.append(
-            f"5–20 cm with weighting ({weighted.mean:.2f} %) is {verdict} without weighting "
+            f"5–20 cm with weighting ({weighted.mean:.2f} %) is "
+            f"{weighting_verdict(weighted.mean, unweighted.mean)} without weighting "
             f"({unweighted.mean:.2f} %) in total."
         )
     return "\n".join(lines), {"rows": data, "at_or_below_paper": met, "compared": compared}
+
+
+def weighting_verdict(weighted: float, unweighted: float) -> str:
+    """How the weighted total compares with the unweighted one at the two decimals printed (the
+    same when the network's own input scaling undoes the weighting, as MATLAB's mapminmax does)."""
+    if f"{weighted:.2f}" == f"{unweighted:.2f}":
+        return "the same as"
+    return "better than" if weighted < unweighted else "not better than"
 
 
 def _between_minus_grid(result: dict) -> float | None:
