@@ -17,13 +17,13 @@ the plain file's modification time, so that "is the checkpoint newer than its ev
 before. The output is deterministic (xz has no time stamp; gzip's is 0 and it names no file): the
 same record always compresses to the same bytes. A record already compressed in the other format
 is converted; figures and everything else are left alone (docs/results/runs/.gitignore keeps the
-runs' figures out of git). ``--keep`` chooses what of each line of metrics.jsonl stays:
-``all`` (the default) every key; ``replay`` the keys in READ_BY_REPORTS and the distance
-learner's fit statistics (lm_*), each number kept to SIGNIFICANT_DIGITS, and the keys in REPLAYED
-exactly, so that parallax-replay of the kept record is bit-identical to that of the whole one;
-``reports`` only the READ_BY_REPORTS keys, rounded: what the reports, the figures and the
-analysis tools read of a run that nothing replays (a single position, a speed of the continuous
-sweep). Rounding halves what is left (the reports print three or four digits).
+runs' figures out of git). ``--keep`` chooses what of each line of metrics.jsonl stays: ``all``
+(the default) every key; ``replay`` the keys in READ_BY_REPORTS and what network_calls reads (the
+fit statistics lm_* and the online distance error), each number kept to SIGNIFICANT_DIGITS, and the
+keys in REPLAYED exactly, so that parallax-replay of the kept record is bit-identical to that of
+the whole one; ``reports`` only the READ_BY_REPORTS keys, rounded: what the reports, the figures
+and the analysis tools read of a run that nothing replays (a single position, a speed of the
+continuous sweep). Rounding halves what is left (the reports print three or four digits).
 """
 
 from __future__ import annotations
@@ -62,7 +62,6 @@ READ_BY_REPORTS = (
     "mae_per_position",
     "mae_recent",
     "mae_recent_per_position",
-    "distance_error",
     "policy_critic_scale",
     "policy_critic_norm",
     "policy_entropy",
@@ -83,8 +82,10 @@ REPLAYED = (
     "pans",
     "best_pans",
 )
-#: The prefix of the distance learner's fit statistics, which network_calls reads.
+#: What network_calls reads besides: the distance learner's fit statistics (keys with this
+#: prefix) and the online distance error at the end of each block (FIT_KEYS).
 FIT_PREFIX = "lm_"
+FIT_KEYS = ("distance_error",)
 #: What ``--keep`` may name, from the most kept to the least.
 KEEPS = ("all", "replay", "reports")
 
@@ -111,7 +112,7 @@ def kept_line(line: dict[str, Any], keep: str) -> dict[str, Any]:
     return {
         k: v if k in REPLAYED else rounded(v)
         for k, v in line.items()
-        if k in REPLAYED or k in READ_BY_REPORTS or k.startswith(FIT_PREFIX)
+        if k in REPLAYED or k in READ_BY_REPORTS or k in FIT_KEYS or k.startswith(FIT_PREFIX)
     }
 
 
