@@ -12,16 +12,17 @@ from pathlib import Path
 COMPRESSED = {".xz": lzma.open, ".gz": gzip.open}
 
 
+def record_forms(path: Path | str) -> list[Path]:
+    """Every file that may hold the record ``path``: the plain file, then its compressed forms."""
+    path = Path(path)
+    return [path.with_name(path.name + suffix) for suffix in ("", *COMPRESSED)]
+
+
 def record_file(path: Path | str) -> Path | None:
     """The file that holds the record ``path`` (say RUN/metrics.jsonl): the plain file, else its
     compressed form (``metrics.jsonl.xz`` or ``.gz``), else None. The plain file wins: the tools
     write plain files, so one beside a compressed copy is the newer record."""
-    path = Path(path)
-    for suffix in ("", *COMPRESSED):
-        candidate = path.with_name(path.name + suffix)
-        if candidate.is_file():
-            return candidate
-    return None
+    return next((form for form in record_forms(path) if form.is_file()), None)
 
 
 def read_record(path: Path | str) -> str:

@@ -27,7 +27,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from parallax import checkpoint
-from parallax.compressed import COMPRESSED, read_record, record_file
+from parallax.compressed import read_record, record_file, record_forms
 from parallax.config import (
     READOUT_PANS,
     RUN_CONFIG_NAME,
@@ -311,9 +311,9 @@ class Trainer:
         # a run that goes on from its last good checkpoint is no longer over
         (self.run_dir / DIVERGED_NAME).unlink(missing_ok=True)
         if not resumed:  # a start from scratch: no lines of an earlier start without a checkpoint
+            for form in record_forms(self.metrics_path)[1:]:  # nor of a compacted record
+                form.unlink(missing_ok=True)
             self.metrics_path.write_text("")
-            for suffix in COMPRESSED:  # nor of a compacted record
-                self.metrics_path.with_name(self.metrics_path.name + suffix).unlink(missing_ok=True)
         config = OmegaConf.to_yaml(self.cfg, resolve=True)
         (self.run_dir / RUN_CONFIG_NAME).write_text(config)
         if self.perturbed:

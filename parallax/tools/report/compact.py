@@ -38,7 +38,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from parallax.compressed import COMPRESSED, read_record, record_file
+from parallax.compressed import COMPRESSED, read_record, record_file, record_forms
 from parallax.health import DIVERGED_NAME
 from parallax.tools.report.runs import (
     METRICS_NAME,
@@ -117,11 +117,16 @@ def kept_line(line: dict[str, Any], keep: str) -> dict[str, Any]:
 
 
 def thin_metrics(run: Path, keep: str) -> None:
-    """Rewrites ``run``'s metrics.jsonl (plain) with what ``keep`` keeps of each line."""
-    lines = read_record(run / METRICS_NAME).splitlines()
-    kept = [json.dumps(kept_line(json.loads(line), keep)) for line in lines]
+    """Rewrites ``run``'s metrics.jsonl (plain) with what ``keep`` keeps of each line; a record
+    that keeps it all already is left as it is."""
+    text = read_record(run / METRICS_NAME)
+    kept = "".join(
+        json.dumps(kept_line(json.loads(line), keep)) + "\n" for line in text.splitlines()
+    )
+    if kept == text:
+        return
     partial = run / (METRICS_NAME + ".tmp")
-    partial.write_text("\n".join(kept) + "\n", encoding="utf-8")
+    partial.write_text(kept, encoding="utf-8")
     partial.replace(run / METRICS_NAME)  # the plain file wins over a compressed one
 
 
@@ -153,10 +158,9 @@ def compact_record(path: Path, suffix: str = ".xz") -> Path | None:
     stat = found.stat()
     os.utime(partial, ns=(stat.st_atime_ns, stat.st_mtime_ns))
     partial.replace(target)
-    for other in ("", *COMPRESSED):
-        stale = path.with_name(path.name + other)
-        if other != suffix and stale.is_file():
-            stale.unlink()
+    for stale in record_forms(path):
+        if stale != target:
+            stale.unlink(missing_ok=True)
     return target
 
 
