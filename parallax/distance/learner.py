@@ -189,8 +189,8 @@ class DistanceLearner:
             self.optimizer.mu = self.optimizer.initial_mu
         inputs, targets = self.queue.inputs, self.queue.targets
         weighted = inputs * self.weights
-        warm = self.fits > 0 and self.warm_start
-        if self.fits > 0 and not self.warm_start:
+        warm = self.is_ready and self.warm_start
+        if self.is_ready and not self.warm_start:
             self.network.reset_parameters(self.init_generator)
         if not (warm and self.keep_first_scaling):
             self.network.fit_scaling(weighted, targets, preserve_function=warm)

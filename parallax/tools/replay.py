@@ -26,7 +26,6 @@ import copy
 import functools
 import itertools
 import json
-import statistics
 import sys
 from collections.abc import Iterable, Sequence
 from importlib import resources
@@ -52,6 +51,7 @@ from parallax.distance_step import learn_online
 from parallax.envs.walk import walk_robots
 from parallax.metrics import DistanceErrorTracker
 from parallax.parts import body_walkers, distance_learner, truths_at, worlds
+from parallax.tools.report.groups import mean_sd
 from parallax.tools.report.runs import (
     METRICS_NAME,
     SUMMARY_NAME,
@@ -489,11 +489,7 @@ def main(argv: list[str] | None = None) -> None:
                 )
         if len(sources) > 1:
             for combo, scored in totals.items():
-                spread = {
-                    what: f"{statistics.fmean(v):.2f} ± "
-                    f"{statistics.stdev(v) if len(v) > 1 else 0.0:.2f} % (n={len(v)})"
-                    for what, v in scored.items()
-                }
+                spread = {what: f"{mean_sd(v)} % (n={len(v)})" for what, v in scored.items()}
                 print(
                     f"[replay] {combo}, mean ± sd over runs: "
                     + "; ".join(f"{what} {text}" for what, text in spread.items()),

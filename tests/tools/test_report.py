@@ -23,6 +23,7 @@ from parallax.metrics import position_label
 from parallax.tools.report import paper_results as paper
 from parallax.tools.report.build import build_report
 from parallax.tools.report.cli import main
+from parallax.tools.report.groups import mean_sd
 from parallax.tools.report.tables import weighting_verdict
 
 RANGES = paper.DISTANCE_RANGES
@@ -409,3 +410,9 @@ def test_the_weighting_verdict_reads_the_totals_as_printed():
     assert weighting_verdict(1.5, 1.62) == "better than"
     # equal at the two decimals printed (the weighting undone by the network's input scaling)
     assert weighting_verdict(12.7200000001, 12.72) == "the same as"
+
+
+def test_mean_sd_keeps_one_runs_columns_aligned_and_marks_no_runs():
+    assert mean_sd([1.0, 3.0]) == "2.00 ± 1.41"
+    assert mean_sd([0.25], 3) == "0.250 ± 0.000"
+    assert mean_sd([]) == "—"

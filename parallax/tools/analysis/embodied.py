@@ -35,6 +35,7 @@ import numpy as np
 
 from parallax.config import load_run_config
 from parallax.tools.replay import ReplayError, find_sources, replay
+from parallax.tools.report.groups import mean_sd
 from parallax.tools.report.runs import record_file
 
 FRACTIONS = (1.0, 0.3, 0.1)
@@ -180,13 +181,6 @@ def study_one(source: Path) -> dict:
     return {"rows": rows, "growth": [growth]}
 
 
-def _mean_sd(values: Sequence[float]) -> str:
-    if not values:
-        return "—"
-    sd = statistics.stdev(values) if len(values) > 1 else 0.0
-    return f"{statistics.fmean(values):.3f} ± {sd:.3f}"
-
-
 def table(results: dict) -> str:
     """The walk fraction × slip table (final models, held-out photographs), as Markdown."""
     rows = results["rows"]
@@ -204,7 +198,7 @@ def table(results: dict) -> str:
         "|---|" + "---|" * len(SLIPS),
     ]
     base = [supervised[s]["mae_m"] for s in seeds if supervised[s]]
-    lines.append(f"| supervisor | {_mean_sd(base)} m |" + " |" * (len(SLIPS) - 1))
+    lines.append(f"| supervisor | {mean_sd(base, 3)} m |" + " |" * (len(SLIPS) - 1))
     for fraction in FRACTIONS:
         cells = []
         for slip in SLIPS:
@@ -216,9 +210,12 @@ def table(results: dict) -> str:
                 and r["stride_slip"] == slip
                 and r["final"]
             ]
+            if not got:
+                cells.append("—")
+                continue
             errors = [r["final"]["mae_m"] for r in got]
             ratios = [r["final"]["mae_m"] / supervised[r["seed"]]["mae_m"] for r in got]
-            cells.append(f"{_mean_sd(errors)} m ({statistics.fmean(ratios):.2f}×)" if got else "—")
+            cells.append(f"{mean_sd(errors, 3)} m ({statistics.fmean(ratios):.2f}×)")
         lines.append(f"| {fraction:.0%} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -39,6 +39,7 @@ from parallax.distance.planner import MovementPlanner
 from parallax.metrics import position_label
 from parallax.tools.evaluate import route_results
 from parallax.tools.replay import ReplayError, find_sources, read_stream
+from parallax.tools.report.groups import mean_sd
 from parallax.tools.report.runs import read_record, record_file
 
 PRICES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
@@ -108,12 +109,6 @@ def curve(run_dir: Path, prices: Sequence[float]) -> dict:
     }
 
 
-def spread(values: list[float], digits: int = 2) -> str:
-    """Mean ± sd over runs ('± 0.00' for one run, so that the columns line up)."""
-    sd = statistics.stdev(values) if len(values) > 1 else 0.0
-    return f"{statistics.fmean(values):.{digits}f} ± {sd:.{digits}f}"
-
-
 def table(results: list[dict]) -> str:
     """Mean ± sd over runs: error, eye movements and travel per presentation at each price."""
 
@@ -129,15 +124,15 @@ def table(results: list[dict]) -> str:
     for i, point in enumerate(results[0]["planner"]):
         rows = [r["planner"][i] for r in results]
         lines.append(
-            f"| planned | {point['price_per_trial']:g} | {spread([p['error_pct'] for p in rows])} "
-            f"| {spread([p['eye_movements'] for p in rows], 0)} | "
-            f"{spread([p['travel_cm'] for p in rows], 0)} |"
+            f"| planned | {point['price_per_trial']:g} | {mean_sd([p['error_pct'] for p in rows])} "
+            f"| {mean_sd([p['eye_movements'] for p in rows], 0)} | "
+            f"{mean_sd([p['travel_cm'] for p in rows], 0)} |"
         )
     for name in results[0]["fixed_estimator"]:
         rows = [r["fixed_estimator"][name] for r in results]
         lines.append(
             f"| fixed {name} cm, the planner's estimator | — | "
-            f"{spread([p['error_pct'] for p in rows])} | {rows[0]['eye_movements']:.0f} | "
+            f"{mean_sd([p['error_pct'] for p in rows])} | {rows[0]['eye_movements']:.0f} | "
             f"{rows[0]['travel_cm']:.0f} |"
         )
     networks = [r["network_error_pct"] for r in results if r["network_error_pct"] is not None]
@@ -145,7 +140,7 @@ def table(results: list[dict]) -> str:
         last = results[0]["fixed_estimator"].get("5-20", {})
         movements, travel = last.get("eye_movements", math.nan), last.get("travel_cm", math.nan)
         lines.append(
-            f"| fixed 5-20 cm, the run's network (parallax-eval) | — | {spread(networks)} | "
+            f"| fixed 5-20 cm, the run's network (parallax-eval) | — | {mean_sd(networks)} | "
             f"{movements:.0f} | {travel:.0f} |"
         )
     return "\n".join(lines)
@@ -189,9 +184,9 @@ def trained_table(planned: list[dict], sweeping: list[dict]) -> str:
         rows = [r["route"] for r in planned if r["price_per_trial"] == price]
         lines.append(
             f"| {price:g} | {len(rows)} | {rows[0]['presentations']} | "
-            f"{spread([r['by_range']['total'] for r in rows])} | "
-            f"{spread([r['eye_movements'] for r in rows], 0)} | "
-            f"{spread([r['travel_cm'] for r in rows], 0)} |"
+            f"{mean_sd([r['by_range']['total'] for r in rows])} | "
+            f"{mean_sd([r['eye_movements'] for r in rows], 0)} | "
+            f"{mean_sd([r['travel_cm'] for r in rows], 0)} |"
         )
     labels = list(planned[0]["eye"]["last_trials_mae"])
     lines += [

@@ -79,6 +79,14 @@ class Stat:
         return cls(*(math.nan if d.get(k) is None else d[k] for k in ("mean", "sd")), d["n"])
 
 
+def mean_sd(values: Sequence[float], digits: int = 2) -> str:
+    """'0.21 ± 0.03' over runs; '± 0.00' for one run, so that columns line up; '—' for none."""
+    if not values:
+        return "—"
+    sd = statistics.stdev(values) if len(values) > 1 else 0.0
+    return f"{statistics.fmean(values):.{digits}f} ± {sd:.{digits}f}"
+
+
 def finite_or_none(value: Any) -> Any:
     return value if not (isinstance(value, float) and not math.isfinite(value)) else None
 
