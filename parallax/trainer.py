@@ -245,6 +245,7 @@ class Trainer:
             "mae_per_position": self.eye.mae_per_position(),
             "last_trials": self.eye.last_trials(int(self.cfg.metrics.summary_trials)),
             "distance_error": self.dist.by_range(),
+            "distance_error_queue": self.exp.distance.queue_error(),
             **self.movement.summary(),
         }
 

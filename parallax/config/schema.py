@@ -333,8 +333,10 @@ class DistanceConfig:
     #: Fits start once the queue holds this many vectors; null: once it is full (§3.5). Fewer
     #: targets arrive when only some presentations are labelled (odometry.walk_fraction < 1).
     fit_from: int | None = None
-    #: global: one mapminmax over all of S, as trainlm does | per_input: each position scaled on
-    #: its own (which would cancel the weighting).
+    #: The network's input processing (parallax.distance.network.INPUT_SCALINGS): global, one
+    #: mapminmax over all of S | per_input, MATLAB's mapminmax, each position scaled on its own
+    #: (which cancels the weighting) | none, the pans as they are, a new network's initial
+    #: weights spread over each input's range (MATLAB's initnw).
     input_scaling: str = "global"
     #: Share of the queue each fit holds out to stop on (MATLAB's dividerand; 0: none): the fit
     #: stops after ``max_fail`` epochs in a row whose error on these vectors rose, and keeps the

@@ -5,9 +5,16 @@ network (mapminmax), inputs and targets are mapped to [−1, 1] inside the modul
 never pre-scale. The scaling lives in buffers and is fitted by ``fit_scaling``; refitting it
 can re-express the weights so that the network's function is unchanged (a true warm start).
 
-Input scaling ``"global"`` (default) uses one min/max over all of S, so the row weights of
-eqs. (11)–(12) survive normalisation; ``"per_input"`` is MATLAB's per-row mapminmax, which
-undoes any constant row weight (the weighting then has no effect at all).
+Input scaling, the three a MATLAB network allows:
+
+- ``"global"`` (default): one min/max over all of S, so the row weights of eqs. (11)–(12) survive
+  normalisation;
+- ``"per_input"``: MATLAB's per-row mapminmax, which undoes any constant row weight (the
+  weighting then has no effect at all);
+- ``"none"``: no input processing (a network whose ``inputs{1}.processFcns`` is empty). The pans
+  enter as they are; only a new network's initialisation sees their ranges, as MATLAB's
+  ``initnw`` spreads the Nguyen–Widrow weights over each input's range. A constant row weight
+  then changes the fit through the optimiser's damping, not through the scaling.
 """
 
 from __future__ import annotations
@@ -20,7 +27,7 @@ from torch import Tensor, nn
 from parallax.config.schema import DistanceConfig
 
 #: The choices of distance.input_scaling (checked by parallax.config).
-INPUT_SCALINGS = ("global", "per_input")
+INPUT_SCALINGS = ("global", "per_input", "none")
 
 
 def minmax_gain_offset(values: Tensor, dim: int | None) -> tuple[Tensor, Tensor]:
@@ -101,13 +108,23 @@ class DistanceMLP(nn.Module):
         """Refit the [−1, 1] scaling to ``inputs`` (n, r) and ``targets`` (n,).
 
         With ``preserve_function`` the layers are re-expressed in the new scaled coordinates so
-        that ``forward`` computes the same function as before (up to rounding).
+        that ``forward`` computes the same function as before (up to rounding). Without it the
+        network is taken as new: under ``"none"`` each input's range is folded into the hidden
+        layer's weights (``initnw``), and the inputs stay unscaled.
         """
         dim = None if self.input_scaling == "global" else 0
         input_gain, input_offset = minmax_gain_offset(inputs, dim)
         input_gain = input_gain.expand(self.inputs).clone()
         input_offset = input_offset.expand(self.inputs).clone()
         target_gain, target_offset = minmax_gain_offset(targets, None)
+        if self.input_scaling == "none":
+            if not preserve_function:
+                # W·(g·x + o) + b = (W·diag(g))·x + (W·o + b): the initial weights cover each
+                # input's raw range as they would cover [−1, 1]
+                weight = self.hidden_layer.weight
+                self.hidden_layer.bias.add_(weight @ input_offset)
+                weight.mul_(input_gain)
+            input_gain, input_offset = torch.ones_like(input_gain), torch.zeros_like(input_offset)
         if preserve_function:
             # x_old = g_old·x + o_old = (g_old/g_new)·(x_new − o_new) + o_old
             ratio = self.input_gain / input_gain

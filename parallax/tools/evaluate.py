@@ -382,6 +382,15 @@ def evaluate(
             )
             pd = result["distance"]["per_distance"]
             curves["grid (held-out textures)"] = ([float(k) for k in pd], list(pd.values()))
+            if "sampled" in runs:
+                # the eye as it trains (the learning policy's draws): with --split train, the
+                # paper's probable scoring of Tables 4–5 on the grid
+                result["distance_sampled"] = distance_results(
+                    exp.distance,
+                    runs["sampled"]["pans"],
+                    runs["sampled"]["distances"],
+                    distance_step(exp.parts).truths(runs["sampled"]["distances"]),
+                )
             if between_run is not None:
                 result["distance_between_grid"] = distance_results(
                     exp.distance,
@@ -440,6 +449,14 @@ def format_eval(result: dict) -> str:
             + "  ".join(
                 f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
                 for k, v in result["distance"]["by_range"].items()
+            )
+        )
+    if "distance_sampled" in result:
+        lines.append(
+            "distance error of the sampled policy's eye (%): "
+            + "  ".join(
+                f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
+                for k, v in result["distance_sampled"]["by_range"].items()
             )
         )
     if "route" in result:

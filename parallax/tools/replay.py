@@ -204,10 +204,17 @@ def replay(
     if body is not None:
         body.close()
     if cut:
-        return {**_cut_at_perturbation(cfg, summary, tracker, run_dir, overrides), "evals": evals}
+        cut_summary = _cut_at_perturbation(
+            cfg, summary, tracker, before_learner, run_dir, overrides
+        )
+        return {**cut_summary, "evals": evals}
     summary["distance_error"] = tracker.by_range()
+    summary["distance_error_queue"] = learner.queue_error()
     if summary.get("before_perturbation") is not None:
         summary["before_perturbation"]["distance_error"] = before or {}
+        summary["before_perturbation"]["distance_error_queue"] = (
+            before_learner.queue_error() if before_learner is not None else {}
+        )
     summary["replayed_from"] = str(run_dir)
     summary["replay_overrides"] = list(overrides)
     checkpoints = {
@@ -336,8 +343,17 @@ def _rescore_evals(
 
 
 def _eval_samples(result: dict, readout: str) -> dict[str, dict]:
-    """eval.json key → the greedy eye's s vectors, read out as ``readout``, and the distances
-    that eval scored (or would have); empty where the eval kept no such vectors."""
+    """eval.json key → the eye's s vectors, read out as ``readout``, and the distances that eval
+    scored (or would have): the greedy eye's, and the sampled policy's where the eval scored
+    them; empty where the eval kept no such vectors."""
+    sampled = (result.get("distance_sampled") or {}).get("samples")
+    if sampled and result.get("readout", "last") == readout:
+        # the learning policy's eye movements, scored as the greedy eye's are
+        return {**_greedy_samples(result, readout), "distance_sampled": sampled}
+    return _greedy_samples(result, readout)
+
+
+def _greedy_samples(result: dict, readout: str) -> dict[str, dict]:
     names = {"grid": "distance", "between": "distance_between_grid"}
     by_readout = result.get("greedy_samples_by_readout") or {}
     if readout in by_readout:
@@ -362,6 +378,7 @@ def _cut_at_perturbation(
     cfg: DictConfig,
     summary: dict,
     tracker: DistanceErrorTracker,
+    learner,
     run_dir: Path,
     overrides: Sequence[str],
 ) -> dict:
@@ -369,6 +386,7 @@ def _cut_at_perturbation(
     cut = {k: v for k, v in summary.items() if k not in ("before_perturbation", "timing")}
     cut.update(before)
     cut["distance_error"] = tracker.by_range()
+    cut["distance_error_queue"] = learner.queue_error() if learner is not None else {}
     cut["before_perturbation"] = None
     cut["replayed_from"], cut["replay_overrides"] = str(run_dir), [*overrides, "until_perturbation"]
     cfg.train.presentations = int(before["presentations"])

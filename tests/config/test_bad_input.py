@@ -178,7 +178,7 @@ BAD_VALUES = [
     ("coder.normalisation=both", "coder.normalisation=both"),
     ("coder.robot_updates=sum", "coder.robot_updates=sum"),
     ("policy.robot_updates=in_turn", "policy.robot_updates=in_turn"),
-    ("distance.input_scaling=none", "distance.input_scaling=none"),
+    ("distance.input_scaling=per_row", "distance.input_scaling=per_row"),
     ("distance.targets=oracle", "distance.targets=oracle"),
     ("train.distance_readout=peak", "train.distance_readout=peak"),
     ("perturbation.rotation_axis=sideways", "perturbation.rotation_axis=sideways"),

@@ -98,11 +98,11 @@ def test_learner_applies_the_weights_in_training_and_prediction():
     assert unweighted.weights.tolist() == [1.0] * 4
 
 
-def test_per_input_scaling_cancels_the_weighting_and_global_scaling_keeps_it():
+def test_per_input_scaling_cancels_the_weighting_and_global_and_no_scaling_keep_it():
     pans, distances = paper_regression(40, np.random.default_rng(2), lateral_positions_m=SMALL_L)
     probe = parallax_pans(SMALL_L, np.array([3.0, 6.5, 10.0]), 0.0, np.random.default_rng(0))
     predictions = {}
-    for scaling in ("per_input", "global"):
+    for scaling in ("per_input", "global", "none"):
         for weighting in (True, False):
             learner = small_learner(input_scaling=scaling, weighting=weighting)
             feed(learner, pans, distances)
@@ -111,6 +111,24 @@ def test_per_input_scaling_cancels_the_weighting_and_global_scaling_keeps_it():
         predictions["per_input", True], predictions["per_input", False], rtol=1e-6
     )
     assert np.abs(predictions["global", True] - predictions["global", False]).max() > 1e-3
+    # without input processing the weights reach the fit only through LM's damping: a change
+    # all the same
+    assert np.abs(predictions["none", True] - predictions["none", False]).max() > 1e-6
+
+
+def test_no_input_scaling_starts_as_per_input_scaling_and_feeds_the_pans_as_they_are():
+    """initnw over each input's range: a new network under "none" computes what the same
+    weights compute behind a per-input mapminmax, and its inputs stay unscaled."""
+    generator = torch.Generator().manual_seed(5)
+    pans = torch.rand(30, 4, generator=generator, dtype=torch.float64) * 3 + 0.2
+    targets = torch.rand(30, generator=generator, dtype=torch.float64) * 7 + 3
+    networks = {}
+    for scaling in ("per_input", "none"):
+        networks[scaling] = DistanceMLP(4, 6, scaling, torch.Generator().manual_seed(9))
+        networks[scaling].fit_scaling(pans, targets, preserve_function=False)
+    torch.testing.assert_close(networks["none"](pans), networks["per_input"](pans))
+    assert networks["none"].input_gain.tolist() == [1.0] * 4
+    assert networks["none"].input_offset.tolist() == [0.0] * 4
 
 
 # -- queue memory, eq. (9) -------------------------------------------------------------------------
@@ -183,7 +201,7 @@ def test_learns_the_paper_regression():
 # -- network scaling -------------------------------------------------------------------------------
 def test_refitting_the_scaling_preserves_the_function():
     generator = torch.Generator().manual_seed(3)
-    for scaling in ("global", "per_input"):
+    for scaling in ("global", "per_input", "none"):
         network = DistanceMLP(4, 6, input_scaling=scaling, generator=generator)
         first = torch.rand(50, 4, generator=generator, dtype=torch.float64) * 3
         network.fit_scaling(
@@ -391,3 +409,20 @@ def test_new_weights_at_every_fit_resume_bit_identically():
         straight.network.state_dict().items(), resumed.network.state_dict().values()
     ):
         assert torch.equal(a, b), name
+
+
+# -- the paper's probable scoring of Tables 4–5 ----------------------------------------------------
+def test_queue_error_scores_the_network_on_the_vectors_of_its_own_queue():
+    pans, distances = paper_regression(60, np.random.default_rng(4), lateral_positions_m=SMALL_L)
+    learner = small_learner()
+    feed(learner, pans[:39], distances[:39])
+    assert learner.queue_error() == {}  # the queue of 40 is not full: no network yet
+    feed(learner, pans[39:], distances[39:])
+    # the queue holds the last 40 vectors, newest first
+    kept_pans, kept_distances = pans[-40:][::-1], distances[-40:][::-1]
+    expected = distance_error_by_range(learner.predict(kept_pans.copy()), kept_distances)
+    assert learner.queue_error() == expected
+    held_out = parallax_pans(SMALL_L, kept_distances, 0.0, np.random.default_rng(9))
+    assert learner.queue_error() != distance_error_by_range(
+        learner.predict(held_out), kept_distances
+    )
