@@ -171,6 +171,7 @@ def replay(
     before_tracker = last_stats = before_stats = None
     body = _Body(cfg) if learner.target_source.walks else None
     before_grown = False
+    fits: list[tuple[int, float, float]] = []  # (presentation, epochs, stopped by max_fail)
     for record in records[: int(summary["presentations"])]:
         if record["perturbed"] and before is None:
             before = tracker.by_range()
@@ -193,6 +194,8 @@ def replay(
                 learner, tracker, record[key], truths, readings, distances=record["distances"]
             )
             last_stats = stats or last_stats
+            if stats.get("trained"):
+                fits.append((tracker.presentation, stats["epochs"], stats["stopped_max_fail"]))
     cut = until_perturbation and summary.get("before_perturbation") is not None
     truths = {
         "before": None if body is None else functools.partial(body.truths, grown=before_grown),
@@ -207,7 +210,7 @@ def replay(
         cut_summary = _cut_at_perturbation(
             cfg, summary, tracker, before_learner, run_dir, overrides
         )
-        return {**cut_summary, "evals": evals}
+        return {**cut_summary, "evals": evals, "fits": fits}
     summary["distance_error"] = tracker.by_range()
     summary["distance_error_queue"] = learner.queue_error()
     if summary.get("before_perturbation") is not None:
@@ -226,6 +229,7 @@ def replay(
         "summary": summary,
         "evals": evals,
         "online": tracker.history,
+        "fits": fits,
         "source": run_dir,
         "checkpoints": {name: parts for name, parts in checkpoints.items() if parts[0] is not None},
     }
