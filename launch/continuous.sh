@@ -43,5 +43,6 @@ px_run python -m parallax.tools.report.compact --keep replay "$runs" "$pairing" 
 px_run python -m parallax.tools.report.compact --keep reports "$speeds" || status=$?
 px_run python -m parallax.tools.report.continuous "$runs" --pairing "$pairing" \
   --speeds "$speeds" --recipe "$(px_record_dir recipe)" \
+  --recipe-last "$(px_record_dir without_replays)/without_best_readout" \
   --json "$report_root/continuous.json" --markdown "$report_root/continuous.md" || status=$?
 exit "$status"

@@ -77,3 +77,33 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, args):
         nc.main([str(run), *args])
     assert exit_info.value.code == 2
     assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_a_replay_reads_the_same_figures_and_each_blocks_own_predictions(tmp_path, capsys):
+    from tests.conftest import train_tiny_run
+
+    run = train_tiny_run(
+        tmp_path / "run",
+        [
+            "train.presentations=8",
+            "distance.validation_fraction=0.34",
+            "distance.max_fail=2",
+            "distance.initial_epochs=50",
+            "distance.epochs_per_call=50",
+        ],
+    )
+    trained = nc.network_calls(run, blocks=4)
+    as_trained = nc.replayed_network_calls(run, [], blocks=4)
+    for mine, theirs in zip(as_trained, trained, strict=True):
+        assert (mine["fits"], mine["unchanged"], mine["epochs"]) == (
+            theirs["fits"],
+            theirs["unchanged"],
+            theirs["epochs"],
+        )
+        assert mine["eye_mae"] == theirs["eye_mae"] is not None
+    assert as_trained[-1]["distance_error"] is not None
+    fresh = nc.replayed_network_calls(run, ["distance.warm_start=false"], blocks=4)
+    assert all(row["unchanged"] is None for row in fresh)  # a new network is never the old one
+    nc.main([str(run), "--blocks", "4", "--replay", "distance.warm_start=false"])
+    out = capsys.readouterr().out
+    assert "distance.warm_start=false" in out and out.count(str(run)) == 2

@@ -8,14 +8,19 @@ From the evaluations (parallax-eval, held-out photographs) of:
 - ``--speeds``: the same at other ``env.sweep.speed_m``;
 - ``--recipe``: the recipe's runs, whose ``recipe_multi_5_20_weighted`` models were evaluated
   before their perturbation (RUN/eval_before);
+- ``--recipe-last``: the same runs replayed with each trial's last pan as the distance readout
+  (``train.distance_readout=last``, the sweep's: the replays of ``without_best_readout``), so
+  that the sweep is also compared with pick-and-place read out the same way;
 
-it writes five tables: the eye's error at the body offsets of L (Table 2's form); the distance
-error per range with the iterations a presentation takes; the two pairings; the error against
+it writes six tables: the eye's error at the body offsets of L (Table 2's form); the distance
+error per range with the iterations a presentation takes; the sweep against pick-and-place as
+paired differences on the seeds both have and the same photographs, with 95 % intervals
+(parallax.tools.report.paired); the two pairings; the error against
 body speed; and the error against lateral travel when the sweep stops early
 (:mod:`parallax.tools.analysis.continuous`). Mean ± standard deviation over seeds.
 
     python -m parallax.tools.report.continuous RUNS --pairing DIR --speeds DIR --recipe DIR
-        [--json FILE] [--markdown FILE]
+        [--recipe-last DIR] [--json FILE] [--markdown FILE]
 """
 
 from __future__ import annotations
@@ -32,21 +37,29 @@ from parallax.config import load_run_config
 from parallax.envs.sweep import fastest_target_pan_deg, sweep_iterations
 from parallax.tools.analysis.continuous import analyse, eye_error_parts
 from parallax.tools.report.groups import Stat
+from parallax.tools.report.paired import paired_difference, seed_means, seeds_needed
 from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, read_record, record_file
 from parallax.writable import file_problem
 
 RANGES = ("3-4.9", "5-6.9", "7-10", "total")
 EYE_PARTS = ("eye_mae_deg", "eye_unlearnable_deg")
 RECIPE = "recipe_multi_5_20_weighted"
+#: The rows of the distance table: the sweep (each trial's last pan, its readout) and
+#: pick-and-place read out as the recipe does (the best-encoded pan) and as the sweep does.
+MOTIONS = {
+    "continuous": "continuous (last pan)",
+    "pick_and_place": "pick-and-place (best-encoded pan)",
+    "pick_and_place_last": "pick-and-place (last pan, replayed)",
+}
 #: The share of a run's last presentations whose online pursuit figures are averaged.
 LAST_SHARE = 0.1
 
 
-def _evaluated(folder: Path, eval_name: str = "") -> list[dict]:
-    """Every run below ``folder`` with an evaluation (RUN/[eval_name/]eval.json): the eval, the
-    run's config and its last presentations' pursuit figures, ordered by seed."""
+def _evaluated(folder: Path, eval_name: str = "", depth: str = "*") -> list[dict]:
+    """Every run ``depth`` below ``folder`` with an evaluation (RUN/[eval_name/]eval.json): the
+    eval, the run's config and its last presentations' pursuit figures, ordered by seed."""
     found = []
-    for summary in sorted(folder.glob("*/summary.json")):
+    for summary in sorted(folder.glob(f"{depth}/summary.json")):
         run = summary.parent
         path = run / eval_name / EVAL_NAME
         if record_file(path) is None:
@@ -82,15 +95,49 @@ def _iterations(cfg) -> int:
     return len(lateral) * int(cfg.env.trial_length)
 
 
-def build(runs: Path, pairing: Path, speeds: Path, recipe: Path) -> dict:
+def _recipe_runs(folder: Path | None) -> list[dict]:
+    if folder is None:
+        return []
+    # a run of the folder, or a replay of it (parallax-replay writes RUN/<overrides>/)
+    runs = _evaluated(folder, "eval_before") + _evaluated(folder, "eval_before", "*/*")
+    return [
+        r
+        for r in runs
+        if any(p.name.startswith(f"experiment={RECIPE},") for p in (r["run"], r["run"].parent))
+    ]
+
+
+def paired_against(sweeps: list[dict], picks: list[dict]) -> dict:
+    """The sweep's distance error minus pick-and-place's, per grid distance (the same held-out
+    photograph at each), on the seeds both have: the paired difference and its interval."""
+    by_seed = {int(r["cfg"].seed): r for r in picks}
+    a, b, seeds = [], [], []
+    for sweep in sweeps:
+        pick = by_seed.get(int(sweep["cfg"].seed))
+        if pick is None:
+            continue
+        mine, theirs = (r["eval"]["distance"]["per_distance"] for r in (sweep, pick))
+        common = [d for d in mine if d in theirs]
+        a.append([mine[d] for d in common])
+        b.append([theirs[d] for d in common])
+        seeds.append(int(sweep["cfg"].seed))
+    difference = paired_difference(a, b)
+    return {
+        **difference.as_dict(),
+        "verdict": difference.verdict,
+        "seed_list": seeds,
+        "seeds_needed": seeds_needed(seed_means(a, b)),
+    }
+
+
+def build(
+    runs: Path, pairing: Path, speeds: Path, recipe: Path, recipe_last: Path | None = None
+) -> dict:
     sweeps = _evaluated(runs)
     if not sweeps:
         raise FileNotFoundError(f"{runs}: no evaluated run (parallax-eval RUN first)")
-    picks = [
-        r
-        for r in _evaluated(recipe, "eval_before")
-        if r["run"].name.startswith(f"experiment={RECIPE},")
-    ]
+    picks = _recipe_runs(recipe)
+    picks_last = _recipe_runs(recipe_last)
     labels = list(sweeps[0]["eval"]["mae_per_position"]["greedy"])
     tracking = {
         label: {
@@ -119,15 +166,24 @@ def build(runs: Path, pairing: Path, speeds: Path, recipe: Path) -> dict:
             "training_iterations": int(sweeps[0]["eval"]["presentations"])
             * _iterations(sweeps[0]["cfg"]),
         },
-        "pick_and_place": {
-            **distance(picks),
-            "iterations": _iterations(picks[0]["cfg"]) if picks else None,
-            "training_iterations": (
-                int(picks[0]["eval"]["presentations"]) * _iterations(picks[0]["cfg"])
-                if picks
-                else None
-            ),
+        **{
+            name: {
+                **distance(items),
+                "iterations": _iterations(items[0]["cfg"]) if items else None,
+                "training_iterations": (
+                    int(items[0]["eval"]["presentations"]) * _iterations(items[0]["cfg"])
+                    if items
+                    else None
+                ),
+            }
+            for name, items in (("pick_and_place", picks), ("pick_and_place_last", picks_last))
+            if items
         },
+    }
+    paired = {
+        name: paired_against(sweeps, items)
+        for name, items in (("pick_and_place", picks), ("pick_and_place_last", picks_last))
+        if items
     }
     seed0 = next(r for r in sweeps if int(r["cfg"].seed) == 0)
 
@@ -165,8 +221,10 @@ def build(runs: Path, pairing: Path, speeds: Path, recipe: Path) -> dict:
     return {
         "runs": [str(r["run"]) for r in sweeps],
         "recipe_runs": [str(r["run"]) for r in picks],
+        "recipe_last_runs": [str(r["run"]) for r in picks_last],
         "tracking": tracking,
         "distance": compared,
+        "paired": paired,
         "pairing": pairings,
         "speed": speed_rows,
         "readouts": readouts,
@@ -203,9 +261,31 @@ def markdown(report: dict) -> str:
         values = " | ".join(_text(cells[k]) for k in RANGES)
         eye = " | ".join(_text(cells[k], 3) for k in EYE_PARTS)
         out.append(
-            f"| {name.replace('_', '-')} | {values} | {cells['iterations']} | "
+            f"| {MOTIONS.get(name, name)} | {values} | {cells['iterations']} | "
             f"{cells['training_iterations']} | {eye} |"
         )
+    if report.get("paired"):
+        out += [
+            "",
+            "## The sweep against pick-and-place, paired",
+            "",
+            "The sweep's distance error minus pick-and-place's (percentage points), per grid "
+            "distance on the same held-out photograph, on the seeds both have; 95 % bootstrap "
+            "interval over seeds and photographs.",
+            "",
+            "| against | seeds | difference | 95 % interval | verdict | seeds that would tell |",
+            "|---|---|---|---|---|---|",
+        ]
+        for name, d in report["paired"].items():
+            seeds = ", ".join(str(seed) for seed in d["seed_list"])
+            verdict = {"a lower": "the sweep is better", "a higher": "the sweep is worse"}.get(
+                d["verdict"], d["verdict"]
+            )
+            out.append(
+                f"| {MOTIONS[name]} | {seeds} | {d['mean']:+.2f} | "
+                f"[{d['low']:+.2f}, {d['high']:+.2f}] | {verdict} | "
+                f"{d['seeds_needed'] if d['seeds_needed'] is not None else '—'} |"
+            )
     out += [
         "",
         "## Which pairing learns to pursue (seed 0)",
@@ -264,6 +344,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--pairing", type=Path, required=True)
     parser.add_argument("--speeds", type=Path, required=True)
     parser.add_argument("--recipe", type=Path, required=True)
+    parser.add_argument(
+        "--recipe-last",
+        type=Path,
+        default=None,
+        help="the recipe's runs replayed with train.distance_readout=last",
+    )
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--markdown", type=Path, default=None)
     args = parser.parse_args(argv)
@@ -272,7 +358,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"continuous: error: {path} {why}", file=sys.stderr)
             sys.exit(2)
     try:
-        report = build(args.runs, args.pairing, args.speeds, args.recipe)
+        report = build(args.runs, args.pairing, args.speeds, args.recipe, args.recipe_last)
     except (FileNotFoundError, ValueError, KeyError, StopIteration) as exc:
         print(f"continuous: error: {exc!r}", file=sys.stderr)
         sys.exit(2)
