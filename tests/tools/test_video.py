@@ -97,7 +97,7 @@ def test_gif_frames_and_size(tiny_run, tmp_path) -> None:
 )
 def test_every_kind_of_robot(experiment, tmp_path) -> None:
     run = train_tiny_run(tmp_path / "run", [f"experiment={experiment}"])
-    shown = list(video.watched_presentations(run, [3.0], say=lambda *_: None))[0]
+    shown = list(video.watched_presentations(run, [3.0], every=4, say=lambda *_: None))[0]
     iterations = [s for s in shown.samples if s.walked_m is None]
     walked = [s for s in shown.samples if s.walked_m is not None]
     assert shown.reading is not None  # the distance learner (or the planner) is ready
@@ -110,7 +110,8 @@ def test_every_kind_of_robot(experiment, tmp_path) -> None:
         assert len(iterations) == 4 * np.isfinite(shown.pans).sum()
     else:  # the body walks from l0 until its hand touches the panel, 3 m ahead of the eye
         assert len(iterations) == ITERATIONS and len(walked) > 2
-        assert 2.0 < walked[-1].walked_m < 3.0
+        # the hand, ahead of the eye, touches 2.98 m on: the walk's last step of 2 cm ends there
+        assert 2.98 <= walked[-1].walked_m <= 3.0 + 1e-6
         assert all(s.pictured for s in walked)
     out = tmp_path / "robot.gif"
     video.write_video(run, out, distances=[3.0], width=480, every=4, progress=False)
