@@ -34,6 +34,10 @@ from parallax.watch import Sample, Watch, read_distance, walk_samples
 #: What each scale's window is on the retina, and its colour.
 WINDOW_NAMES = {"fine": "fovea", "coarse": "periphery"}
 WINDOW_COLOURS = {"fine": (255, 59, 48), "coarse": (0, 200, 255)}
+#: Colours the panel draws with (RGB): a GIF's palette keeps them exact.
+PANEL_COLOURS = [
+    (255, 255, 255), (0, 0, 0), (31, 119, 180), (255, 127, 14), *WINDOW_COLOURS.values(),
+]  # fmt: skip
 #: Frame size (pixels) is width × width·ASPECT, both even (what video encoders want).
 ASPECT = 9 / 16
 

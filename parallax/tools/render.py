@@ -132,7 +132,9 @@ def main(argv: list[str] | None = None) -> int:
     video.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.video is not None:
-        return video.main(args, parser)
+        return video.main(args)
+    if args.run_dir is not None:
+        parser.error(f"{args.run_dir}: a run directory is for --video OUT only")
     if len(args.distance) != 1:
         parser.error("--distance takes one distance for the pictures (several only with --video)")
     try:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -29,15 +30,13 @@ from parallax import checkpoint
 from parallax.config import READOUT_PANS, distance_readout, load_run_config
 from parallax.distance_step import distance_step
 from parallax.movement import planned_route
-from parallax.panel import Watched, frame_size, panel_frames, watched
+from parallax.panel import PANEL_COLOURS, Watched, frame_size, panel_frames, watched
 from parallax.tools.evaluate import frozen_experiment, read_checkpoint
 from parallax.watch import Watch
 from parallax.writable import file_problem
 
 #: The video formats, by OUT's extension.
 FORMATS = (".mp4", ".gif")
-#: Colours of a GIF frame's palette (at most 256).
-GIF_COLOURS = 128
 
 
 def check_video_options(
@@ -115,7 +114,9 @@ def watched_presentations(
             how = ", planned route" if pres.route is not None else ""
             how += ", walks to the panel" if exp.walks else ""
             photo = name.split("[")[0]  # the photograph, without where it was cut from
-            title = f"{cfg.curriculum.name}{how}: panel at {d:g} m, {split} photograph {photo}"
+            run = run_dir.resolve().name  # e.g. the experiment and seed
+            run = run if len(run) <= 40 else run[:39] + "…"
+            title = f"{run}{how}: panel at {d:g} m, {split} photograph {photo}"
             yield watched(watch, pres, exp.parts, readout, title, truths, walk=exp.walks)
     finally:
         exp.close()
@@ -127,56 +128,99 @@ class _Sink:
     def __init__(self, out: Path, fps: float, size: tuple[int, int]) -> None:
         self.out, self.fps, self.size = out, fps, size
         self.temporary = out.with_name(f".{out.stem}.partial{out.suffix}")
-        self.gif = out.suffix.lower() == ".gif"
-        self.images: list = []
-        self.durations: list[int] = []
+        self.gif = _Gif() if out.suffix.lower() == ".gif" else None
+        self.writer: cv2.VideoWriter | None = None  # opened with the first frame
         self.frames = 0
-        if not self.gif:
-            fourcc = cv2.VideoWriter_fourcc(*"mp4v")
-            self.writer = cv2.VideoWriter(str(self.temporary), fourcc, fps, size)
-            if not self.writer.isOpened():
-                raise OSError(f"OpenCV cannot write an .mp4 video at {self.temporary}")
+
+    def _open(self) -> cv2.VideoWriter:
+        self.out.parent.mkdir(parents=True, exist_ok=True)
+        fourcc = cv2.VideoWriter_fourcc(*"mp4v")
+        writer = cv2.VideoWriter(str(self.temporary), fourcc, self.fps, self.size)
+        if not writer.isOpened():
+            raise OSError(f"OpenCV cannot write an .mp4 video at {self.temporary}")
+        return writer
 
     def add(self, frame: np.ndarray, seconds: float | None = None) -> None:
         """One frame, shown for one frame's time or ``seconds``; :attr:`frames` counts the
         frames the file holds."""
-        self.frames += 1
-        if self.gif:
-            from PIL import Image
-
-            # no dithering: flat plot colours stay flat, which keeps the GIF small
-            image = Image.fromarray(frame).quantize(
-                colors=GIF_COLOURS, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE
-            )
-            self.images.append(image)
-            self.durations.append(int(round(1000 * (seconds or 1 / self.fps))))
+        if self.gif is not None:
+            self.gif.add(frame, int(round(1000 * (seconds or 1 / self.fps))))
+            self.frames += 1
             return
+        if self.writer is None:
+            self.writer = self._open()
         repeats = 1 if seconds is None else max(1, round(seconds * self.fps))
-        self.frames += repeats - 1  # a frame held is written again: the file counts each one
+        self.frames += repeats  # a frame held is written again: the file counts each one
         for _ in range(repeats):
             self.writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
 
     def close(self) -> Path:
-        if self.gif:
-            first, *rest = self.images
-            first.save(
-                self.temporary,
-                format="GIF",
-                save_all=True,
-                append_images=rest,
-                duration=self.durations,
-                loop=0,
-                optimize=True,
-            )
+        if self.gif is not None:
+            self.out.parent.mkdir(parents=True, exist_ok=True)
+            self.gif.save(self.temporary)
         else:
             self.writer.release()
         os.replace(self.temporary, self.out)
         return self.out
 
     def abort(self) -> None:
-        if not self.gif:
+        if self.writer is not None:
             self.writer.release()
         self.temporary.unlink(missing_ok=True)
+
+
+class _Gif:
+    """GIF frames on one palette, each pixel that did not change left transparent (so showing
+    the frame before): the cameras' pictures change little from frame to frame, and runs of
+    transparent pixels compress to almost nothing."""
+
+    #: The palette entry of "as in the frame before".
+    UNCHANGED = 255
+
+    def __init__(self) -> None:
+        self.palette = None  # a Pillow palette image, made from the first frame
+        self.previous: np.ndarray | None = None  # the last frame's palette indices
+        self.images: list = []
+        self.durations: list[int] = []
+
+    def add(self, frame: np.ndarray, milliseconds: int) -> None:
+        from PIL import Image
+
+        image = Image.fromarray(frame)
+        if self.palette is None:
+            # the panel's own colours exactly (the plots, the windows), the pictures' the rest
+            keys = list(PANEL_COLOURS)
+            pictures = image.quantize(
+                colors=self.UNCHANGED - len(keys), method=Image.Quantize.MEDIANCUT
+            ).getpalette()[: 3 * (self.UNCHANGED - len(keys))]
+            entries = pictures + [v for c in keys for v in c]
+            entries += [0] * (768 - len(entries))
+            self.palette = Image.new("P", (1, 1))
+            self.palette.putpalette(entries)
+        # no dithering: flat colours stay flat, and an unchanged pixel keeps its index
+        indices = np.asarray(image.quantize(palette=self.palette, dither=Image.Dither.NONE))
+        shown = indices.copy()
+        if self.previous is not None:
+            shown[indices == self.previous] = self.UNCHANGED
+        self.previous = indices
+        coded = Image.fromarray(shown, mode="P")
+        coded.putpalette(self.palette.getpalette())
+        self.images.append(coded)
+        self.durations.append(milliseconds)
+
+    def save(self, path: Path) -> None:
+        first, *rest = self.images
+        first.save(
+            path,
+            format="GIF",
+            save_all=True,
+            append_images=rest,
+            duration=self.durations,
+            loop=0,
+            transparency=self.UNCHANGED,
+            disposal=1,  # each frame stays, under the next one's transparent pixels
+            optimize=False,  # keeps the palette, and so the meaning of each index
+        )
 
 
 def write_video(
@@ -256,7 +300,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def main(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+def main(args: argparse.Namespace) -> int:
     """parallax-render --video: one clear line and exit 2 for bad input, nothing written."""
     try:
         check_video_options(
@@ -276,5 +320,6 @@ def main(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             device=args.device,
         )
     except (FileNotFoundError, ValueError) as error:
-        parser.error(str(error))
+        print(f"parallax-render: error: {error}", file=sys.stderr)
+        return 2
     return 0
