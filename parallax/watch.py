@@ -15,7 +15,7 @@ back where it stood.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -67,10 +67,17 @@ class Watch:
     pictures of every ``every``-th iteration and of each trial's last. Pass :meth:`around` as
     :meth:`parallax.experiment.Experiment.run_presentation`'s ``watch``."""
 
-    def __init__(self, world: Any, every: int = 1, side_size: tuple[int, int] = SIDE_SIZE):
+    def __init__(
+        self,
+        world: Any,
+        every: int = 1,
+        side_size: tuple[int, int] = SIDE_SIZE,
+        on_sample: Callable[[Sample], Any] | None = None,
+    ):
         if every < 1:
             raise ValueError(f"every must be at least 1 iteration, got {every}")
         self.world, self.every, self.side_size = world, int(every), side_size
+        self.on_sample = on_sample  # e.g. a progress bar's update
         self.samples: list[Sample] = []
         self.reference: np.ndarray | None = None  # I0
         self.camera: mujoco.MjvCamera | None = None
@@ -147,6 +154,8 @@ class Watch:
             sample.side = self.physics.render_view(self.camera, *self.side_size)
             sample.eye = np.array(obs["image"])
         self.samples.append(sample)
+        if self.on_sample is not None:
+            self.on_sample(sample)
 
 
 def read_distance(

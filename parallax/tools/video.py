@@ -78,9 +78,11 @@ def watched_presentations(
     every: int = 1,
     device: str | None = None,
     say=print,
+    progress: bool = False,
 ) -> Iterable[Watched]:
     """One frozen, greedy presentation of the run's checkpoint per distance, on held-out
-    photograph ``texture_index``, each watched as the panel draws it."""
+    photograph ``texture_index``, each watched as the panel draws it; ``say`` gets the header,
+    and with ``progress`` a bar follows each presentation's iterations."""
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
     state = read_checkpoint(run_dir, cfg, checkpoint_name, device)
@@ -109,8 +111,16 @@ def watched_presentations(
         for d in distances:
             for env in exp.envs:
                 env.task.set_next_stimulus(texture_index=texture_index, distance=float(d))
-            watch = Watch(exp.envs[0], every=every)
-            pres = exp.run_presentation(learn=False, greedy=True, route=route, watch=watch.around)
+            task = exp.envs[0].task  # a planned route may stop before the end of L
+            bar = tqdm(
+                total=task.trials * task.trial_length, desc=f"{d:g} m", unit="iteration",
+                disable=not progress, leave=False,
+            )  # fmt: skip
+            watch = Watch(exp.envs[0], every=every, on_sample=lambda _, bar=bar: bar.update())
+            with bar:
+                pres = exp.run_presentation(
+                    learn=False, greedy=True, route=route, watch=watch.around
+                )
             how = ", planned route" if pres.route is not None else ""
             how += ", walks to the panel" if exp.walks else ""
             photo = name.split("[")[0]  # the photograph, without where it was cut from
@@ -246,11 +256,14 @@ def write_video(
     try:
         for watched in watched_presentations(
             run_dir, distances, texture_index, checkpoint_name, perturbation, split, every,
-            device, say,
+            device, lambda header: say(f"{header} → {out}"), progress,
         ):  # fmt: skip
             pictured = sum(s.pictured for s in watched.samples)
             frames = panel_frames(watched, width)
-            bar = tqdm(frames, total=pictured, desc="frames", unit="frame", disable=not progress)
+            bar = tqdm(
+                frames, total=pictured, desc="drawing", unit="frame", disable=not progress,
+                leave=False,
+            )  # fmt: skip
             last = None
             for frame in bar:
                 if last is not None:

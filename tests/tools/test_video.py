@@ -178,3 +178,10 @@ def test_tensorboard_panel_is_a_video_with_moviepy(tmp_path, monkeypatch) -> Non
     assert written["tag"] == "world/presentation"
     assert written["v"].shape == (1, 5, 3, 360, 640)  # (N, T, C, H, W), as add_video takes it
     assert written["v"][0, 4, 0, 0, 0] == 4
+
+
+def test_watching_changes_nothing_the_run_computes(tiny_run, tmp_path) -> None:
+    """train.image_every does not change a run's results (it is result-neutral): the same run
+    with no presentation watched writes the same metrics.jsonl."""
+    unwatched = train_tiny_run(tmp_path / "run", ["train.image_every=100"])
+    assert (unwatched / "metrics.jsonl").read_text() == (tiny_run / "metrics.jsonl").read_text()
