@@ -124,7 +124,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of the texture draw (default 0)")
     parser.add_argument(
-        "--texture", type=int, default=None, help="texture index (default: drawn from --seed)"
+        "--texture",
+        type=int,
+        default=None,
+        help="texture index (default: drawn from --seed; --video: held-out photograph 0)",
     )
     parser.add_argument(
         "--image-size", type=int, default=256, help="eye image size in pixels (default 256)"
