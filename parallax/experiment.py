@@ -10,6 +10,8 @@ metrics, logging and checkpoints, and `parallax.tools.evaluate` the frozen measu
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import torch
 from omegaconf import DictConfig
@@ -110,13 +112,16 @@ class Experiment:
         greedy: bool = False,
         keep_view: bool = False,
         route: loop.Route | None = None,
+        watch: Callable[[loop.Executor], loop.Executor] | None = None,
     ) -> Presentation:
         """All robots live through one presentation (:func:`parallax.loop.presentation`), its
         steps scheduled on threads by a :class:`~parallax.lockstep.Lockstep`; learning on or
-        frozen; ``route`` (one robot, §7) instead of sweeping L."""
+        frozen; ``route`` (one robot, §7) instead of sweeping L; ``watch`` (e.g.
+        :meth:`parallax.watch.Watch.around`) stands in front of the lockstep."""
         run = Lockstep(self.envs, self.coder, self.turns)
+        executor = run if watch is None else watch(run)
         pres = loop.presentation(
-            self.parts, run, learn=learn, greedy=greedy, route=route, keep_view=keep_view
+            self.parts, executor, learn=learn, greedy=greedy, route=route, keep_view=keep_view
         )
         pres.waits = dict(run.seconds)  # the last dictionary step's wait included
         return pres

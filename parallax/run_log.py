@@ -3,13 +3,14 @@
 One :class:`RunLog` per :meth:`parallax.trainer.Trainer.fit`: each presentation's
 :class:`parallax.record.PresentationRecord` becomes a line of metrics.jsonl and TensorBoard
 scalars (the eye-movement MAE of eq. 16, the distance error of Tables 4–5, the coder's and the
-policy's statistics), the dictionaries' atoms and robot 0's I0 beside I(t) every
-train.image_every presentations, and a progress line: a tqdm bar on a terminal, else a printed
-line twenty times a run.
+policy's statistics); every train.image_every presentations the dictionaries' atoms, robot 0's
+I0 beside I(t) and the video panel of its presentation (parallax.panel); and a progress line: a
+tqdm bar on a terminal, else a printed line twenty times a run.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -21,8 +22,17 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from parallax.coding import MultiScaleCoder
+from parallax.panel import montage
 from parallax.presentation import Presentation
 from parallax.record import PresentationRecord
+
+#: Frames per second of the presentation's video in TensorBoard.
+PANEL_FPS = 8
+
+
+def can_write_video() -> bool:
+    """Whether TensorBoard's writer can encode a video here (its add_video needs moviepy)."""
+    return importlib.util.find_spec("moviepy") is not None
 
 
 class RunLog:
@@ -72,6 +82,15 @@ class RunLog:
             self.writer.add_image(f"coder/atoms_{scale}", grid, step, dataformats=fmt)
         if pres.last_view is not None:
             self.writer.add_image("world/I0_beside_It", pres.last_view, step, dataformats="HWC")
+
+    def panel(self, frames: list[np.ndarray], step: int) -> None:
+        """Robot 0's presentation, drawn by :mod:`parallax.panel`: a video where TensorBoard can
+        write one (it needs the optional moviepy), else a few of its frames as one image."""
+        if can_write_video():
+            video = np.stack(frames)[None].transpose(0, 1, 4, 2, 3)  # (1, T, C, H, W)
+            self.writer.add_video("world/presentation", video, step, fps=PANEL_FPS)
+        else:
+            self.writer.add_image("world/presentation", montage(frames), step, dataformats="HWC")
 
     def _progress(self, record: PresentationRecord, steps_per_second: float) -> None:
         distance = record.distance_error.get("total")

@@ -41,10 +41,17 @@ from parallax.experiment import Experiment
 from parallax.health import DIVERGED_NAME, Diverged, Health
 from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, position_label
 from parallax.movement import movement
+from parallax.panel import panel_frames, watched
 from parallax.parts import Parts
 from parallax.presentation import Presentation
 from parallax.record import PresentationRecord
 from parallax.run_log import RunLog
+from parallax.watch import Watch
+
+#: The video panel of train.image_every's presentations in TensorBoard: about this many frames
+#: (and each trial's end), this wide in pixels; few and small, so that drawing them costs a
+#: small share of the presentations between.
+PANEL_FRAMES, PANEL_WIDTH = 24, 640
 
 
 class Trainer:
@@ -165,15 +172,18 @@ class Trainer:
         return True
 
     # --- one presentation ------------------------------------------------------------------
-    def step_presentation(self, keep_view: bool) -> tuple[Presentation, PresentationRecord]:
-        """One presentation on its route, the eye's errors, the distance step after a sweep of
-        the final list, and the presentation's record."""
+    def step_presentation(
+        self, keep_view: bool, watch: Watch | None = None
+    ) -> tuple[Presentation, PresentationRecord]:
+        """One presentation on its route (robot 0 watched by ``watch``), the eye's errors, the
+        distance step after a sweep of the final list, and the presentation's record."""
         # the random start pan only during train.start_jitter_presentations, then pan 0 as in the
         # paper; derived from the count, so a resumed run switches at the same presentation
         jittered = start_jitter_on(self.cfg, self.presentation)
         self.exp.set_start_jitter(jittered)
         route = self.movement.route()
-        pres = self.exp.run_presentation(learn=True, keep_view=keep_view, route=route)
+        around = None if watch is None else watch.around
+        pres = self.exp.run_presentation(learn=True, keep_view=keep_view, route=route, watch=around)
         for b in range(self.exp.robots):
             for p in range(len(pres.labels)) if pres.route is None else pres.route:
                 self.eye.record(pres.labels[p], pres.pans[b, p], pres.targets[b, p])
@@ -277,8 +287,9 @@ class Trainer:
             while self.presentation < total:
                 self._switch_schedule()
                 keep_view = (self.presentation + 1) % int(self.cfg.train.image_every) == 0
+                watch = Watch.spread(self.exp.envs[0], PANEL_FRAMES) if keep_view else None
                 started = time.perf_counter()
-                pres, record = self.step_presentation(keep_view)
+                pres, record = self.step_presentation(keep_view, watch)
                 seconds = time.perf_counter() - started
                 self.wall_time += seconds
                 line = log.write(record, pres.steps * self.exp.robots / seconds)
@@ -286,6 +297,7 @@ class Trainer:
                 self.health.report(line, skipped, fitted, log.writer, self.steps)
                 if keep_view:
                     log.images(self.exp.coder, pres, self.steps)
+                    log.panel(self._panel(watch, pres), self.steps)
                 if self.health.must_stop:
                     stop = self.health.stop_record(self.presentation, self.saved)
                     # §5's first phase, when the run got past it, is a result all the same
@@ -303,6 +315,13 @@ class Trainer:
         summary = self.summary()
         self.summary_path.write_text(json.dumps(summary, indent=2) + "\n")
         return summary
+
+    def _panel(self, watch: Watch, pres: Presentation) -> list:
+        """The frames of robot 0's presentation (parallax.panel), small for TensorBoard."""
+        readout = distance_readout(self.cfg)
+        title = f"presentation {self.presentation}: panel at {pres.distances[0]:.1f} m"
+        shown = watched(watch, pres, self.exp.parts, readout, title, self.learn_distance.truths)
+        return list(panel_frames(shown, width=PANEL_WIDTH))
 
     def _start(self) -> bool:
         """Resume from the checkpoint if asked and there is one (else start the metrics afresh),

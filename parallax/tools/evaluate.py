@@ -214,26 +214,8 @@ def evaluate(
         where = f"--out {out}" if out else str(run_dir)
         raise ValueError(f"{where}: {problem}; choose another folder with --out DIR")
     readout = readout or distance_readout(cfg)  # by default, s as the run's distance learner saw it
-    if device is not None:  # e.g. a run trained on a GPU, evaluated on a machine without one
-        if device != "cpu" and not (device == "cuda" or device.startswith("cuda:")):
-            raise ValueError(f"--device must be cpu or cuda, got {device!r}")
-        cfg.device = device
-    if str(cfg.device).startswith("cuda") and not torch.cuda.is_available():
-        raise ValueError(
-            f"the run was trained with device={cfg.device} and torch sees no CUDA device here; "
-            "pass --device cpu"
-        )
-    if int(cfg.train.threads) > 0:
-        # as in training: the matrices are small, and extra intra-op threads contend for the
-        # cores the world and the coder's helper threads use (docs/performance.md)
-        torch.set_num_threads(int(cfg.train.threads))
+    state = read_checkpoint(run_dir, cfg, checkpoint_name, device)
     ckpt_path = run_dir / checkpoint_name
-    if not ckpt_path.is_file():
-        raise FileNotFoundError(f"{run_dir} has no {checkpoint_name}: nothing to evaluate")
-    try:
-        state = checkpoint.read(ckpt_path, config=cfg)
-    except checkpoint.CheckpointError as exc:
-        raise ValueError(f"{exc}; {_other_checkpoint(run_dir, checkpoint_name)}") from None
     for item in stimuli:
         key, sep, value = item.partition("=")
         if not sep or not key.startswith(STIMULI_PREFIX) or key == f"{STIMULI_PREFIX}split":
@@ -256,34 +238,10 @@ def evaluate(
             f"env.robots={trained_robots}"
         )
     cfg.env.robots = robots
-    exp = Experiment(cfg, stimuli_split=split)
+    exp, perturbed, jittered = frozen_experiment(
+        cfg, state, ckpt_path, split, perturbation, start_jitter, trained_robots
+    )
     try:
-        learnt = state["experiment"]
-        if robots != trained_robots:
-            # the checkpoint holds one stream per trained robot; these robots keep their own
-            learnt = {**learnt, "env_random": [env.task.random.get_state() for env in exp.envs]}
-        try:
-            exp.load_state_dict(learnt)
-        except (KeyError, RuntimeError, TypeError, ValueError, IndexError) as exc:
-            # written by another version of parallax or another experiment: its parts do not fit
-            raise ValueError(
-                f"{ckpt_path} does not fit this run's models ({checkpoint.describe(exc)}); "
-                f"{_other_checkpoint(run_dir, checkpoint_name)}"
-            ) from None
-        exp.set_stage(len(exp.stages) - 1)
-        start = perturbation_start(cfg)
-        # Perturbed once a presentation ran after the switch (a checkpoint taken at the switch
-        # holds the learnt state from before it).
-        was_perturbed = start is not None and state["presentation"] > start
-        perturbed = {"auto": was_perturbed, "on": True, "off": False}[perturbation]
-        exp.set_perturbation(perturbed)
-        # auto: trials start as the checkpoint's last training presentations did (jittered or 0)
-        jittered = {
-            "auto": start_jitter_on(cfg, max(0, int(state["presentation"]) - 1)),
-            "on": True,
-            "off": False,
-        }[start_jitter]
-        exp.set_start_jitter(jittered)
         if not exp.distance.is_ready:
             print(
                 "[parallax-eval] the distance learner never trained (queue not full): "
@@ -414,6 +372,83 @@ def evaluate(
         plots.mae_curves(records, out_dir / "mae_curves.png", perturbation_at=switch)
     (out_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
     return result
+
+
+def read_checkpoint(
+    run_dir: Path, cfg, checkpoint_name: str = checkpoint.CHECKPOINT_NAME, device: str | None = None
+) -> dict:
+    """The checkpoint ``checkpoint_name`` of ``run_dir``, checked against its config ``cfg``
+    (:func:`parallax.config.load_run_config`), whose device it sets to ``device`` (default: the
+    run's) and whose torch threads it applies. Errors name what to do instead."""
+    if device is not None:  # e.g. a run trained on a GPU, evaluated on a machine without one
+        if device != "cpu" and not (device == "cuda" or device.startswith("cuda:")):
+            raise ValueError(f"--device must be cpu or cuda, got {device!r}")
+        cfg.device = device
+    if str(cfg.device).startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(
+            f"the run was trained with device={cfg.device} and torch sees no CUDA device here; "
+            "pass --device cpu"
+        )
+    if int(cfg.train.threads) > 0:
+        # as in training: the matrices are small, and extra intra-op threads contend for the
+        # cores the world and the coder's helper threads use (docs/performance.md)
+        torch.set_num_threads(int(cfg.train.threads))
+    ckpt_path = Path(run_dir) / checkpoint_name
+    if not ckpt_path.is_file():
+        raise FileNotFoundError(f"{run_dir} has no {checkpoint_name}: nothing to evaluate")
+    try:
+        return checkpoint.read(ckpt_path, config=cfg)
+    except checkpoint.CheckpointError as exc:
+        raise ValueError(f"{exc}; {_other_checkpoint(Path(run_dir), checkpoint_name)}") from None
+
+
+def frozen_experiment(
+    cfg,
+    state: dict,
+    ckpt_path: Path,
+    split: str = "heldout",
+    perturbation: str = "auto",
+    start_jitter: str = "auto",
+    trained_robots: int | None = None,
+) -> tuple[Experiment, bool, bool]:
+    """The run of ``cfg`` with the learnt state of the checkpoint ``state`` (read from
+    ``ckpt_path``) on the final list of its curriculum, on the photographs of ``split``; the
+    perturbation and the start jitter ``auto`` (as at the end of training), ``on`` or ``off``.
+    Robots beyond the ``trained_robots`` (default: cfg.env.robots) start their worlds' random
+    streams from the run's seed. Returns the experiment, whether it is perturbed and whether
+    its trials start from a jittered pan."""
+    exp = Experiment(cfg, stimuli_split=split)
+    try:
+        learnt = state["experiment"]
+        if trained_robots is not None and int(cfg.env.robots) != trained_robots:
+            # the checkpoint holds one stream per trained robot; these robots keep their own
+            learnt = {**learnt, "env_random": [env.task.random.get_state() for env in exp.envs]}
+        try:
+            exp.load_state_dict(learnt)
+        except (KeyError, RuntimeError, TypeError, ValueError, IndexError) as exc:
+            # written by another version of parallax or another experiment: its parts do not fit
+            raise ValueError(
+                f"{ckpt_path} does not fit this run's models ({checkpoint.describe(exc)}); "
+                f"{_other_checkpoint(ckpt_path.parent, ckpt_path.name)}"
+            ) from None
+        exp.set_stage(len(exp.stages) - 1)
+        start = perturbation_start(cfg)
+        # Perturbed once a presentation ran after the switch (a checkpoint taken at the switch
+        # holds the learnt state from before it).
+        was_perturbed = start is not None and state["presentation"] > start
+        perturbed = {"auto": was_perturbed, "on": True, "off": False}[perturbation]
+        exp.set_perturbation(perturbed)
+        # auto: trials start as the checkpoint's last training presentations did (jittered or 0)
+        jittered = {
+            "auto": start_jitter_on(cfg, max(0, int(state["presentation"]) - 1)),
+            "on": True,
+            "off": False,
+        }[start_jitter]
+        exp.set_start_jitter(jittered)
+    except BaseException:
+        exp.close()
+        raise
+    return exp, perturbed, jittered
 
 
 def _other_checkpoint(run_dir: Path, name: str) -> str:

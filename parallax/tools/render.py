@@ -9,6 +9,9 @@ Writes two PNGs into ``--out``:
 
 Bad input (distance ≤ 0, non-finite values, a texture index out of range) is refused before
 anything is written.
+
+``parallax-render RUN --video OUT`` writes a video of a trained run instead
+(:mod:`parallax.tools.video`).
 """
 
 from __future__ import annotations
@@ -19,10 +22,11 @@ import sys
 from pathlib import Path
 
 import cv2
-import mujoco
 import numpy as np
 
 from parallax.geometry import disparity_score
+from parallax.tools import video
+from parallax.watch import side_camera
 
 SIDE_SIZE = (800, 480)
 
@@ -34,17 +38,6 @@ def _label(image: np.ndarray, text: str, strip: int = 22) -> np.ndarray:
         band, text, (4, strip - 7), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 1, cv2.LINE_AA
     )
     return np.concatenate([band, image], axis=0)
-
-
-def side_camera(distance_m: float, lateral_m: float) -> mujoco.MjvCamera:
-    """A free camera behind the robot's right shoulder that frames the robot and the panel."""
-    camera = mujoco.MjvCamera()
-    camera.type = mujoco.mjtCamera.mjCAMERA_FREE
-    camera.lookat[:] = (0.45 * distance_m, 0.25 - lateral_m, 0.65)
-    camera.distance = 1.05 * distance_m + 1.0
-    camera.azimuth = 32.0
-    camera.elevation = -11.0
-    return camera
 
 
 def render_pictures(
@@ -112,25 +105,45 @@ def write_pictures(out_dir: str | Path, **options) -> list[Path]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="parallax-render", description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "run_dir",
+        nargs="?",
+        default=None,
+        help="a run directory, for --video (the pictures need none)",
+    )
     parser.add_argument("--out", default="docs", help="folder for the PNGs (default: docs)")
     parser.add_argument(
-        "--distance", type=float, default=3.0, help="panel distance d in metres (default 3)"
+        "--distance",
+        type=float,
+        nargs="+",
+        default=[3.0],
+        help="panel distance d in metres (default 3); --video: one presentation per distance",
     )
     parser.add_argument(
         "--lateral", type=float, default=0.1, help="lateral position l in metres (default 0.1)"
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of the texture draw (default 0)")
     parser.add_argument(
-        "--texture", type=int, default=None, help="texture index (default: drawn from --seed)"
+        "--texture",
+        type=int,
+        default=None,
+        help="texture index (default: drawn from --seed; --video: held-out photograph 0)",
     )
     parser.add_argument(
         "--image-size", type=int, default=256, help="eye image size in pixels (default 256)"
     )
+    video.add_arguments(parser)
     args = parser.parse_args(argv)
+    if args.video is not None:
+        return video.main(args)
+    if args.run_dir is not None:
+        parser.error(f"{args.run_dir}: a run directory is for --video OUT only")
+    if len(args.distance) != 1:
+        parser.error("--distance takes one distance for the pictures (several only with --video)")
     try:
         paths = write_pictures(
             args.out,
-            distance_m=args.distance,
+            distance_m=args.distance[0],
             lateral_m=args.lateral,
             seed=args.seed,
             texture_index=args.texture,
