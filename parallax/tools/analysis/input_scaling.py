@@ -40,6 +40,7 @@ import numpy as np
 from tqdm import tqdm
 
 from parallax.checkpoint import BEFORE_PERTURBATION_NAME, CHECKPOINT_NAME
+from parallax.config import run_name
 from parallax.distance.network import INPUT_SCALINGS
 from parallax.tools.replay import ReplayError, find_sources, replay
 from parallax.tools.report.groups import Stat
@@ -111,9 +112,19 @@ def replay_errors(run: Path, overrides: list[str]) -> dict:
     }
 
 
-def _run_one(job: tuple[Path, str, float | None, list[str]]) -> tuple:
-    run, scaling, y, common = job
-    return run, scaling, y, replay_errors(run, combo_overrides(scaling, y, common))
+def _run_one(job: tuple[Path, str, float | None, list[str], Path | None]) -> tuple:
+    run, scaling, y, common, cache = job
+    overrides = combo_overrides(scaling, y, common)
+    kept = None if cache is None else cache / f"{run.name}__{run_name(','.join(overrides))}.json"
+    if kept is not None and kept.is_file():
+        return run, scaling, y, json.loads(kept.read_text())
+    found = replay_errors(run, overrides)
+    if kept is not None:  # written whole, so that an interrupted study resumes from it
+        kept.parent.mkdir(parents=True, exist_ok=True)
+        partial = kept.with_suffix(".part")
+        partial.write_text(json.dumps(found))
+        partial.replace(kept)
+    return run, scaling, y, found
 
 
 def study(
@@ -122,10 +133,12 @@ def study(
     ys: Sequence[float] = DEFAULT_Y,
     common: Sequence[str] = (),
     jobs: int = 1,
+    cache: Path | None = None,
 ) -> dict:
-    """Every (run, scaling, weighting) replayed; the table of totals and the paired effects."""
+    """Every (run, scaling, weighting) replayed; the table of totals and the paired effects.
+    ``cache``: a folder keeping each replay's errors, read instead of replaying again."""
     settings = [(s, y) for s in scalings for y in (None, *ys)]
-    work = [(run, s, y, list(common)) for run in runs for s, y in settings]
+    work = [(run, s, y, list(common), cache) for run in runs for s, y in settings]
     errors: dict[tuple[str, str], dict[Path, dict]] = {}
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
         done = pool.map(_run_one, work) if jobs > 1 else map(_run_one, work)
@@ -248,6 +261,12 @@ def main(argv: list[str] | None = None) -> None:
         help="a replayable setting for every replay (repeatable)",
     )
     parser.add_argument("--jobs", type=int, default=1, help="replays side by side")
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        default=None,
+        help="keep each replay's errors here, and read them instead of replaying again (resume)",
+    )
     parser.add_argument("--json", default=None, help="write the result here")
     parser.add_argument("--markdown", default=None, help="write the tables here")
     args = parser.parse_args(argv)
@@ -269,7 +288,7 @@ def main(argv: list[str] | None = None) -> None:
             f"{1 + len(args.y)} weightings, {args.jobs} at a time",
             flush=True,
         )
-        result = study(runs, args.scalings, args.y, args.common, args.jobs)
+        result = study(runs, args.scalings, args.y, args.common, args.jobs, args.cache)
     except (ReplayError, FileNotFoundError, ValueError) as exc:
         print(f"input_scaling: error: {str(exc).splitlines()[0]}", file=sys.stderr)
         sys.exit(2)
