@@ -6,8 +6,9 @@
 #                                from their checkpoints (finished ones are only re-summarised).
 #   px_sweep SWEEP_DIR ARGS...   parallax-train -m ARGS on the chosen launcher into SWEEP_DIR;
 #                                the caller's "$@" goes last, so it overrides anything before it.
-#   px_eval SWEEP_DIR            parallax-eval every finished run whose eval.json is missing or
-#                                older than its checkpoint (N_JOBS at a time; log in RUN/eval.log).
+#   px_eval SWEEP_DIR [CHECKPOINT [SUBDIR [ARGS...]]]   parallax-eval every finished run whose
+#                                eval.json (in RUN/SUBDIR) is missing or older than its checkpoint
+#                                (N_JOBS at a time; log in RUN/SUBDIR/eval.log).
 #   px_report OUT NAME TITLE TABLES SWEEP_DIR...   parallax-report into OUT/NAME.
 #   px_distance_source ARGS...   the finished runs whose logged eye movements the distance-learner
 #                                ablations (y, c, weighting) replay, in the array distance_sources:
@@ -77,30 +78,45 @@ px_sweep() {
 }
 
 px_eval() {
-  local sweep_dir="$1"
+  # px_eval SWEEP_DIR [CHECKPOINT [SUBDIR [PARALLAX_EVAL_ARGS...]]]: parallax-eval of CHECKPOINT
+  # (default checkpoint.pt) of every finished run below SWEEP_DIR into RUN/SUBDIR (default the run
+  # itself) where its eval.json is missing or older than the checkpoint, N_JOBS at a time
+  local sweep_dir="$1" checkpoint="${2:-checkpoint.pt}" subdir="${3:-}"
+  shift $(( $# < 3 ? $# : 3 ))
   if [[ "${PARALLAX_EVAL:-1}" == 0 ]]; then
     return 0
   fi
   if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
-    echo "parallax-eval RUN  # for each finished run below $sweep_dir without an up-to-date eval.json"
+    echo "parallax-eval RUN --checkpoint $checkpoint --out RUN${subdir:+/$subdir} $*  # each finished run below $sweep_dir without an up-to-date eval"
     return 0
   fi
-  local todo=() summary run
+  local todo=() summary run out failed=0
   while IFS= read -r -d '' summary; do
     run="$(dirname "$summary")"
-    if [[ -f "$run/checkpoint.pt" && ( ! -f "$run/eval.json" || "$run/checkpoint.pt" -nt "$run/eval.json" ) ]]; then
+    out="$run${subdir:+/$subdir}"
+    if [[ -f "$run/$checkpoint" && ( ! -f "$out/eval.json" || "$run/$checkpoint" -nt "$out/eval.json" ) ]]; then
       todo+=("$run")
     fi
   done < <(find "$sweep_dir" -name summary.json -not -path '*/.*' -print0 2>/dev/null)
   if (( ${#todo[@]} == 0 )); then
     return 0
   fi
-  echo "[launch] parallax-eval on ${#todo[@]} runs, ${N_JOBS:-2} at a time (logs: RUN/eval.log)"
-  # shellcheck disable=SC2016
-  local one_run='parallax-eval "$1" > "$1/eval.log" 2>&1 ||'
-  # shellcheck disable=SC2016
-  one_run+=' { echo "[launch] parallax-eval failed on $1 (see $1/eval.log)" >&2; exit 1; }'
-  printf '%s\0' "${todo[@]}" | xargs -0 -n 1 -P "${N_JOBS:-2}" sh -c "$one_run" sh
+  echo "[launch] parallax-eval of $checkpoint on ${#todo[@]} runs, ${N_JOBS:-2} at a time (logs: RUN/${subdir:+$subdir/}eval.log)"
+  for run in "${todo[@]}"; do
+    while (( $(jobs -rp | wc -l) >= ${N_JOBS:-2} )); do
+      wait -n || failed=1
+    done
+    out="$run${subdir:+/$subdir}"
+    mkdir -p "$out"
+    {
+      parallax-eval "$run" --checkpoint "$checkpoint" --out "$out" "$@" > "$out/eval.log" 2>&1 \
+        || { echo "[launch] parallax-eval failed on $run (see $out/eval.log)" >&2; exit 1; }
+    } &
+  done
+  while (( $(jobs -rp | wc -l) > 0 )); do
+    wait -n || failed=1
+  done
+  return "$failed"
 }
 
 px_report() {

@@ -1,12 +1,27 @@
 #!/usr/bin/env bash
-# Ablation — the sensory coder's scales (paper §3.3): coarse only, fine only, both (the
-# paper's), three seeds each, on the default configuration (our recipe, 5–20 cm with weighting).
-# Extra arguments are Hydra overrides for every job, e.g.
-#     bash launch/ablation_scales.sh train.presentations=800
-# Then parallax-eval on each run and the report docs/results/ablations/scales.md (figures and
-# scales.json beside it). launch/ablation_lib.sh lists the environment settings (LAUNCHER, …).
+# Ablation — the sensory coder's scales (paper §3.3): the coarse scale alone and the fine scale
+# alone, each family at its own budget, three seeds each (SEEDS):
+#     parallax-train experiment=paper_multi_5_10 coder=coarse|fine seed=N
+#         (the paper's algorithm, 5–10 cm: its 5–20 cm runs are long)
+#     parallax-train experiment=recipe_multi_5_20_weighted coder=coarse|fine seed=N   (ours)
+# Both scales together are each family's own runs (launch/reproduce.sh). The runs live in
+# docs/results/runs/ablation_scales (RECORD_ROOT; committed, compacted, resumable), then
+# parallax-eval of each run before and after its perturbation, as the reproduction evaluates.
+# Extra arguments are Hydra overrides for every run. launch/ablation_lib.sh lists the environment
+# settings (LAUNCHER, N_JOBS, …).
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
-px_ablation scales "Ablation: coarse and fine scales (paper §3.3)" \
-  coder=coarse,fine,two_scale "seed=${SEEDS:-0,1,2}" "$@"
+runs="$(px_record_dir ablation_scales)"
+status=0
+px_sweep "$runs" experiment=paper_multi_5_10,recipe_multi_5_20_weighted coder=coarse,fine \
+  "seed=${SEEDS:-0,1,2}" "$@" || status=$?
+# as the reproduction evaluates its models (launch/reproduce.sh, EVAL_ARGS): the greedy eye on
+# held-out photographs at each grid distance and between them
+read -ra eval_args <<< "${EVAL_ARGS:---robots 16 --greedy-only --between $(LC_ALL=C seq -s ' ' -f '%.2f' 3.05 0.2 9.85)}"
+px_eval "$runs" checkpoint.pt "" "${eval_args[@]}" || status=$?
+px_eval "$runs" checkpoint_before_perturbation.pt eval_before "${eval_args[@]}" || status=$?
+px_run python -m parallax.tools.report.compact "$runs" --keep replay || status=$?
+px_report "$report_root/ablations" scales.md "Ablation: coarse and fine scales (paper §3.3)" \
+  ablation "$runs" || status=$?
+exit "$status"
