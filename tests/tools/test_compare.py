@@ -15,9 +15,10 @@ def _stat(mean, n=3):
     return {"mean": mean, "sd": 0.01, "n": n}
 
 
-def _family(eye, distance, evals):
+def _family(eye, distance, evals, queue=None):
     """A parallax-report JSON with every Table 2–3 cell at ``eye`` and every Table 4–5 cell at
-    ``distance``; the 5–20 cm weighted group holds ``evals``."""
+    ``distance`` (and, scored on the network's own queue, at ``queue`` if given); the 5–20 cm
+    weighted group holds ``evals``."""
     cells = {
         column: {
             p: {"ours": {"mean": _stat(eye)}} if paper.TABLE2[column][p] else {"ours": None}
@@ -30,12 +31,17 @@ def _family(eye, distance, evals):
         for i, row in enumerate(paper.TABLE4)
     }
     weighted = f"g_{list(paper.TABLE4).index(paper.WEIGHTING_5_20)}"
+    queue_rows = {
+        row: {"ours": {r: _stat(queue) for r in paper.DISTANCE_RANGES}} for row in paper.TABLE4
+    }
     return {
         "paper": {
             "table2": {"cells": cells},
             "table3": {"cells": cells},
             "table4": {"rows": rows},
             "table5": {"rows": rows},
+            **({} if queue is None else {"table4_queue": {"rows": queue_rows}}),
+            **({} if queue is None else {"table5_queue": {"rows": queue_rows}}),
         },
         "groups": [{"id": weighted, "runs": [{"evals": evals}]}],
     }
@@ -76,9 +82,15 @@ def test_three_columns_and_the_cells_worse_than_the_paper(tmp_path):
     # within 1.5× of the paper: ours everywhere; the unsourced family's 0.5° only where the paper
     # has at least 0.34° (single 20 cm before; single 13, 15, 20 cm and 5–20 cm's 20 cm after)
     near = data["near_paper"]["families"]
-    assert near["ours"] == {"eye": [30, 30], "distance_totals": [6, 6]}
-    assert near["unsourced"] == {"eye": [5, 30], "distance_totals": [0, 6]}
-    assert "| unsourced | 5 of 30 | 0 of 6 |" in text
+    assert near["ours"] == {
+        "eye": [30, 30],
+        "distance_totals": [6, 6],
+        "distance_totals_queue": [0, 0],
+    }
+    assert near["unsourced"] == {
+        "eye": [5, 30], "distance_totals": [0, 6], "distance_totals_queue": [0, 0]
+    }  # fmt: skip
+    assert "| unsourced | 5 of 30 | 0 of 6 | 0 of 0 |" in text
     # in the Markdown a family worse in many cells of a table is one line
     assert "- unsourced, Table 4: 12 of 12 cells (1.41× to 4.76×)" in text
     assert f"unsourced, Table 2, {paper.SINGLE} at 5 cm" not in text
@@ -149,3 +161,25 @@ def test_the_middle_column_can_be_the_paper_family(tmp_path):
         "| Table 4: distance error, 5-10 cm without weighting | 4.33 % | 12.00 ± 0.01 % (n=3) |"
         in (table)
     )
+
+
+def test_the_papers_scoring_is_a_second_table_and_count_beside_ours(tmp_path):
+    from parallax.tools.report.compare import readme_table
+
+    (tmp_path / "paper.json").write_text(json.dumps(_family(0.2, 9.0, [], queue=3.0)))
+    (tmp_path / "recipe.json").write_text(json.dumps(_family(0.1, 0.5, [])))
+    text, data = compare(tmp_path / "paper.json", tmp_path / "recipe.json", middle="paper")
+    near = data["near_paper"]["families"]["paper_family"]
+    # 3 % is within 1.5× of the paper's totals 2.69–4.48 % but not of 1.30 %: 5 of 6
+    assert near["distance_totals"] == [0, 6] and near["distance_totals_queue"] == [5, 6]
+    assert "**Table 4 (queue)** — distance-estimation error (%) under the paper's probable" in text
+    assert data["table5_queue"][paper.WEIGHTING_5_20]["total"]["paper_family"]["mean"] == 3.0
+    table = readme_table(data)
+    assert (
+        "| Table 4 on its own queue, 5-10 cm without weighting | 4.33 % | 3.00 ± 0.01 % (n=3) |"
+        in table
+    )
+    # a family that has no such scoring yet: the rows are left out of the README's table
+    (tmp_path / "paper.json").write_text(json.dumps(_family(0.2, 9.0, [])))
+    _, data = compare(tmp_path / "paper.json", tmp_path / "recipe.json", middle="paper")
+    assert "own queue" not in readme_table(data)

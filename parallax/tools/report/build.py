@@ -163,6 +163,12 @@ def build_report(
             text, data = distance_table(selection, phase)
             md += [text, ""]
             paper_data[key] = data
+        for phase, key in (("before", "table4_queue"), ("after", "table5_queue")):
+            # the paper's probable scoring, where the runs record it
+            text, data = distance_table(selection, phase, scoring="queue")
+            if data["compared"]:
+                md += [text, ""]
+            paper_data[key] = data
         if selection.notes:
             md += (
                 ["Choices where several groups fit a cell:", ""]

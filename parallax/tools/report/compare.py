@@ -87,8 +87,15 @@ def _load(path: str | Path) -> dict:
     return result
 
 
+#: The distance tables under each scoring: ours (held-out photographs) and the paper's probable
+#: protocol (the network on its own queue at the end of each phase).
+DISTANCE_KEYS = {"held_out": ("table4", "table5"), "queue": ("table4_queue", "table5_queue")}
+
 _NOT_RUN: dict = {
-    "paper": {k: {"cells": {}, "rows": {}} for k in ("table2", "table3", "table4", "table5")},
+    "paper": {
+        k: {"cells": {}, "rows": {}}
+        for k in ("table2", "table3", *DISTANCE_KEYS["held_out"], *DISTANCE_KEYS["queue"])
+    },
     "groups": [],
 }
 
@@ -128,7 +135,7 @@ def eye_table(families: dict[str, dict], key: str) -> tuple[str, dict, list[dict
 def distance_table(families: dict[str, dict], key: str) -> tuple[str, dict, list[dict], Counter]:
     """Table 4 (key 'table4') or 5 ('table5'): per row and range of distances, three cells;
     the cells worse than the paper and, per family, how many cells were compared."""
-    published_table = paper.TABLE4 if key == "table4" else paper.TABLE5
+    published_table = paper.TABLE4 if key.startswith("table4") else paper.TABLE5
     header = ["Simulation"]
     for r in paper.DISTANCE_RANGES:
         title = paper.DISTANCE_RANGE_TITLES[r]
@@ -141,7 +148,7 @@ def distance_table(families: dict[str, dict], key: str) -> tuple[str, dict, list
             row.append(f"{published[r]:.2f}")
             cell = {"paper": published[r]}
             for family, result in families.items():
-                found = result["paper"][key]["rows"].get(row_name) or {}
+                found = (result["paper"].get(key) or {"rows": {}})["rows"].get(row_name) or {}
                 stat = Stat.from_dict((found.get("ours") or {}).get(r))
                 row.append(_text(stat))
                 cell[family] = stat.as_dict()
@@ -180,9 +187,12 @@ def near_paper(data: dict, families: Sequence[str]) -> dict[str, dict[str, list[
             for c in column.values()
             if c["paper"] is not None
         ],
-        "distance_totals": [
-            row["total"] for key in ("table4", "table5") for row in data[key].values()
-        ],
+        **{
+            f"distance_totals{'' if scoring == 'held_out' else '_' + scoring}": [
+                row["total"] for key in keys for row in data.get(key, {}).values()
+            ]
+            for scoring, keys in DISTANCE_KEYS.items()
+        },
     }
     counts: dict[str, dict[str, list[int]]] = {}
     for family in families:
@@ -193,7 +203,7 @@ def near_paper(data: dict, families: Sequence[str]) -> dict[str, dict[str, list[
     return counts
 
 
-def worse_lines(number: int, worse: list[dict], compared: Counter) -> list[str]:
+def worse_lines(number: int | str, worse: list[dict], compared: Counter) -> list[str]:
     """The Markdown lines of one table's cells worse than the paper: each cell of a family with
     few, one summary line for a family with many (the JSON keeps every cell)."""
     lines = []
@@ -319,8 +329,18 @@ def readme_table(data: dict) -> str:
                 [f"{what}, {name}", _published_range(table, column)]
                 + [_eye_range(data[key], column, f) for f in families]
             )
-    for key, what in (("table4", "Table 4: distance error"), ("table5", "Table 5: after it")):
-        for row_name, cells in data[key].items():
+    for key, what in (
+        ("table4", "Table 4: distance error"),
+        ("table5", "Table 5: after it"),
+        ("table4_queue", "Table 4 on its own queue"),
+        ("table5_queue", "Table 5 on its own queue"),
+    ):
+        table = data.get(key, {})
+        if key.endswith("_queue") and not any(
+            cells["total"][f]["n"] for cells in table.values() for f in families
+        ):
+            continue  # no family recorded the paper's scoring yet
+        for row_name, cells in table.items():
             total = cells["total"]
             rows.append(
                 [f"{what}, {row_name}", f"{total['paper']:.2f} %"]
@@ -400,6 +420,14 @@ def compare(
             distance_table,
         ),
         ("table5", 5, "the same after the perturbation", distance_table),
+        (
+            "table4_queue",
+            "4 (queue)",
+            "distance-estimation error (%) under the paper's probable scoring (the network on "
+            "its own queue at the end of the phase), before",
+            distance_table,
+        ),
+        ("table5_queue", "5 (queue)", "the same after the perturbation", distance_table),
     ):
         text, cells, worse, compared = table(families, key)
         md += [f"**Table {number}** — {what}.", "", text, ""]
@@ -418,7 +446,12 @@ def compare(
         "better than the paper's counts), of the cells run.",
         "",
         md_table(
-            ["family", "eye cells, Tables 2–3", "distance totals, Tables 4–5"],
+            [
+                "family",
+                "eye cells, Tables 2–3",
+                "distance totals, Tables 4–5 (held-out photographs)",
+                "distance totals, Tables 4–5 (on its own queue)",
+            ],
             [
                 [family, *(f"{k} of {n}" for k, n in counts.values())]
                 for family, counts in near.items()

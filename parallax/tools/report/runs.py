@@ -167,6 +167,12 @@ class Run:
         summary = self.phase_summary(phase)
         return None if summary is None else (summary.get("distance_error") or {})
 
+    def queue_distance(self, phase: str) -> dict | None:
+        """The network scored on its own queue at the end of the phase (the paper's probable
+        scoring of Tables 4–5); None for a run that predates it."""
+        summary = self.phase_summary(phase)
+        return None if summary is None else summary.get("distance_error_queue")
+
 
 def _is_run_dir(path: Path) -> bool:
     return (path / RUN_CONFIG_NAME).is_file() or (path / HYDRA_CONFIG).is_file()
