@@ -127,6 +127,9 @@ def distance_results(
         "mae_m": float(np.abs(pred - true).mean()),
         "trials": int(at.size),
         "per_distance": per_distance,
+        # each trial's error, in the samples' order: comparisons pair them photograph by
+        # photograph (parallax.tools.report.paired_ablation)
+        "errors": rel.tolist(),
         "samples": {"pans": np.asarray(pans).tolist(), "distances": at.tolist()},
     }
 

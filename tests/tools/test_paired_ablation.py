@@ -1,0 +1,81 @@
+"""python -m parallax.tools.report.paired_ablation: an ablation's values against its baseline as
+paired differences with intervals, on synthetic runs with a known difference."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from omegaconf import OmegaConf
+
+from parallax.config.schema import Config
+from parallax.tools.report import paired_ablation as pa
+
+
+def _run(folder, seed: int, y: float, eye: float, errors: list[float]):
+    """A finished run without a perturbation: its eye error at two positions and its held-out
+    errors photograph by photograph."""
+    cfg = OmegaConf.structured(Config)
+    cfg.seed, cfg.distance.y = seed, y
+    cfg.curriculum.lateral_positions = [0.05, 0.1]
+    cfg.perturbation.start_fraction = None
+    cfg.train.presentations = 10
+    folder.mkdir(parents=True)
+    (folder / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
+    summary = {
+        "presentations": 10,
+        "last_trials": {"5": {"mean": eye, "var": 0.0, "trials": 100},
+                        "10": {"mean": eye + 0.1, "var": 0.0, "trials": 100}},
+        "distance_error": {"total": float(np.mean(errors))},
+        "distance_error_queue": {"total": float(np.mean(errors)) / 2},
+        "before_perturbation": None,
+    }  # fmt: skip
+    (folder / "summary.json").write_text(json.dumps(summary))
+    grid = [3.0 + 0.1 * k for k in range(len(errors))]
+    evaluation = {
+        "presentations": 10,
+        "perturbed": False,
+        "stimuli_overrides": [],
+        "distance": {
+            "by_range": {"total": float(np.mean(errors))},
+            "per_distance": {f"{d:.2f}": e for d, e in zip(grid, errors)},
+            "errors": errors,
+        },
+    }
+    (folder / "eval.json").write_text(json.dumps(evaluation))
+
+
+def test_a_known_improvement_is_told_apart_and_no_change_is_not(tmp_path):
+    rng = np.random.default_rng(0)
+    for seed in range(4):
+        difficulty = rng.gamma(2.0, 2.0, 30)
+        base = difficulty + rng.normal(0, 0.3, 30)
+        _run(tmp_path / f"y1_{seed}", seed, 1.0, 0.2, (5 + base).tolist())
+        _run(tmp_path / f"y2_{seed}", seed, 2.0, 0.2 + 0.01 * seed, (4 + base).tolist())
+        noise = rng.normal(0, 0.3, 30)
+        _run(tmp_path / f"y4_{seed}", seed, 4.0, 0.2, (5 + difficulty + noise).tolist())
+    result = pa.ablation([tmp_path], "distance.y", baseline="1.0")
+    rows = {row["value"]: row["measures"] for row in result["rows"]}
+    better = rows["2.0"]["held_out_before"]["difference"]
+    assert better["mean"] == pytest.approx(-1.0) and better["tells_apart"]
+    assert better["samples"] == 4 * 30
+    same = rows["4.0"]["held_out_before"]["difference"]
+    assert not same["tells_apart"] and same["low"] < 0 < same["high"]
+    assert rows["2.0"]["eye_before"]["difference"]["mean"] == pytest.approx(0.015)
+    assert rows["2.0"]["queue_before"]["difference"]["mean"] == pytest.approx(-0.5)
+    assert "difference" not in rows["1.0"]["held_out_before"]  # the baseline itself
+    assert rows["2.0"]["eye_after"]["value"]["n"] == 0  # never perturbed: no "after"
+    text = pa.markdown(result)
+    assert "| 2.0 | 0, 1, 2, 3 |" in text and "told apart" in text
+
+
+def test_two_runs_of_one_value_and_seed_or_one_value_only_are_refused(tmp_path, capsys):
+    _run(tmp_path / "a", 0, 1.0, 0.2, [1.0, 2.0])
+    with pytest.raises(SystemExit) as stop:
+        pa.main([str(tmp_path), "--factor", "distance.y"])
+    assert stop.value.code == 2 and "fewer than two values" in capsys.readouterr().err
+    _run(tmp_path / "b", 0, 1.0, 0.2, [1.0, 2.0])
+    with pytest.raises(SystemExit):
+        pa.main([str(tmp_path), "--factor", "distance.y"])
+    assert "two runs of distance.y=1.0 with seed 0" in capsys.readouterr().err
