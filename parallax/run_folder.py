@@ -52,7 +52,7 @@ class RunLocked(RuntimeError):
 
 def _command(program: str | None) -> str:
     name = program or Path(sys.argv[0]).name
-    return shlex.join([name, *sys.argv[1:]])
+    return " ".join([name, shlex.join(sys.argv[1:])]).strip()
 
 
 def _describe(record: dict | None, lock_path: Path, locks: bool) -> str:
