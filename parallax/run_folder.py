@@ -32,6 +32,7 @@ from pathlib import Path
 
 LOCK_NAME = "parallax.lock"
 
+_HOST = socket.gethostname()
 #: the mode a plain open() would give a new file (mkstemp's is 0600)
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -79,9 +80,13 @@ def _read_record(path: Path) -> dict | None:
     return record if isinstance(record, dict) else None
 
 
+def _own(record: dict | None) -> bool:
+    return bool(record) and record.get("pid") == os.getpid() and record.get("host") == _HOST
+
+
 def _alive_here(record: dict) -> bool:
     """Whether the holder of ``record`` may still run: on another host we cannot tell (yes)."""
-    if record.get("host") != socket.gethostname():
+    if record.get("host") != _HOST:
         return True
     try:
         os.kill(int(record["pid"]), 0)
@@ -143,7 +148,7 @@ class RunLock:
         self._before = os.pread(fd, 1 << 16, 0) if existed else None
         record = {
             "pid": os.getpid(),
-            "host": socket.gethostname(),
+            "host": _HOST,
             "since": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
             "command": _command(self.program),
         }
@@ -170,7 +175,7 @@ class RunLock:
                     raise
                 self.locks = False
                 record = _read_record(self.path)
-                if record and record.get("pid") != os.getpid() and _alive_here(record):
+                if record and not _own(record) and _alive_here(record):
                     return _describe(record, self.path, locks=False)
                 return None
 
@@ -218,12 +223,15 @@ def holder(folder: str | Path) -> str | None:
     try:
         fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
     except BlockingIOError:
-        return _describe(_read_record(path), path, locks=True)
+        record = _read_record(path)
+        if _own(record):  # this process's own lock (flock sees another open file as another)
+            return None
+        return _describe(record, path, locks=True)
     except OSError as exc:
         if exc.errno not in _NO_LOCKS:
             return None
         record = _read_record(path)
-        if record and record.get("pid") != os.getpid() and _alive_here(record):
+        if record and not _own(record) and _alive_here(record):
             return _describe(record, path, locks=False)
         return None
     finally:

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
+import torch
 
 from parallax import checkpoint
 from parallax.train import check_command_line
@@ -57,6 +58,14 @@ def _without_eye(state: dict) -> dict:
     return state
 
 
+def _nan_policy(state: dict) -> dict:
+    """The policy's tensors overwritten with NaN: a file that loads and has every part."""
+    for value in state["experiment"]["policy"].values():
+        if isinstance(value, torch.Tensor) and value.is_floating_point():
+            value.fill_(float("nan"))
+    return state
+
+
 #: name → (how the checkpoint is damaged, what the line says about it)
 DAMAGES = {
     "truncated": (lambda data, state: data[:3000], "is truncated or damaged (3000 bytes;"),
@@ -67,6 +76,10 @@ DAMAGES = {
     "other_run": (
         lambda data, state: _other_settings(state),
         "was written by a run with other settings (coder.atoms: 16 → 32)",
+    ),
+    "nan": (
+        lambda data, state: _nan_policy(state),
+        "holds numbers that are not finite (experiment.policy.",
     ),
 }
 
