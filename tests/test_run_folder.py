@@ -173,6 +173,7 @@ def test_a_sweep_with_a_job_folder_in_use_is_refused_before_its_first_job(held):
     assert line.endswith("choose another folder with hydra.sweep.dir=...")
 
 
+@pytest.mark.slow
 def test_two_parallax_train_processes_on_one_folder(tmp_path):
     """The issue as a user met it: the same command started twice on one folder. The second is
     refused with one line naming the first; the first runs to the end, its record in order."""
