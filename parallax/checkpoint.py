@@ -191,9 +191,12 @@ def read(
     """The checkpoint at ``path``, checked: a whole torch file holding a dict with every key of
     :data:`REQUIRED_KEYS` and, when it records the settings it was trained with and ``config``
     (a composed config) is given, written with the same ones (the changes a resume may make
-    aside); with ``finite``, tensors and arrays of finite numbers only (the trainer writes no
-    checkpoint while its numbers are not finite, but in a study of divergence). Anything else
-    raises :class:`CheckpointError`. The recorded settings come back in this parallax's words
+    aside); and tensors and arrays of finite numbers only. The trainer writes no checkpoint
+    while its numbers are not finite, so one that holds them was damaged, but in a study of
+    divergence (``train.stop_after_non_finite=null``), whose checkpoints may hold what diverged:
+    a checkpoint that records that setting, or any with ``finite=False`` (a command continuing
+    such a study), is not checked for them. Anything else raises :class:`CheckpointError`. The
+    recorded settings come back in this parallax's words
     (:func:`parallax.config.upgrade_saved`)."""
     from omegaconf import OmegaConf
 
@@ -229,10 +232,17 @@ def read(
         if changed:
             listed = "; ".join(changed[:2]) + ("; …" if len(changed) > 2 else "")
             raise CheckpointError(path, f"was written by a run with other settings ({listed})")
-    found = non_finite(state) if finite else None
+    found = non_finite(state) if finite and not _studies_divergence(state) else None
     if found:
         raise CheckpointError(path, f"holds numbers that are not finite ({found})")
     return state
+
+
+def _studies_divergence(state: dict[str, Any]) -> bool:
+    """Whether the checkpoint's run ran on through numbers that were not finite."""
+    recorded = state.get("config")
+    train = recorded.get("train") if isinstance(recorded, dict) else None
+    return isinstance(train, dict) and train.get("stop_after_non_finite", 0) is None
 
 
 def global_rng_state() -> dict[str, Any]:
