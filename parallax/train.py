@@ -281,6 +281,12 @@ def _prepare(cfg: DictConfig, run_dir: Path) -> str | None:
         trainer.load_checkpoint()
     except checkpoint.CheckpointError as exc:
         trainer.exp.close()
+        previous = run_dir / checkpoint.PREVIOUS_NAME
+        if latest and previous.exists() and _usable(previous, cfg):
+            return (
+                f"{exc}; resume from the one before with train.resume_from=previous, or move "
+                "the checkpoints aside to start afresh"
+            )
         return f"{exc}; move it aside to start afresh"
     _prepared = trainer
     return None

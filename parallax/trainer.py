@@ -11,6 +11,8 @@ Tables 4–5). Everything a run writes lives in its run directory:
     checkpoint.pt     the latest checkpoint (atomic), and checkpoint_previous.pt the one before
     summary.json      the final summary (and the one before the perturbation)
     diverged.json     instead of a summary, for a run stopped as its numbers stopped being finite
+    parallax.lock     while a command writes the folder: who (parallax.run_folder, whose lock
+                      parallax-train takes before it builds this trainer)
 
 After each presentation :mod:`parallax.health` reads its record: a diverging critic is named
 once, and numbers that stopped being finite hold back the checkpoints and, in the end, stop the
