@@ -31,15 +31,21 @@ HOLD = (
 )
 
 
+def _hold(folder: Path) -> subprocess.Popen:
+    """Another process that holds ``folder``'s lock (until it is killed)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", HOLD, str(folder)], stdout=subprocess.PIPE, text=True
+    )
+    assert proc.stdout.readline().strip() == "held"
+    return proc
+
+
 @pytest.fixture
 def held(tmp_path):
     """A folder whose lock another process holds: (folder, that process)."""
     folder = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-c", HOLD, str(folder)], stdout=subprocess.PIPE, text=True
-    )
+    proc = _hold(folder)
     try:
-        assert proc.stdout.readline().strip() == "held"
         yield folder, proc
     finally:
         proc.kill()
@@ -136,6 +142,59 @@ def test_an_atomic_write_that_fails_leaves_the_old_file(tmp_path, monkeypatch):
     with pytest.raises(OSError):
         write_atomic(path, "new\n")
     assert path.read_text() == "old\n" and sorted(tmp_path.iterdir()) == [path]
+
+
+# --- the tools -------------------------------------------------------------------------------
+@pytest.fixture
+def finished(tmp_path) -> Path:
+    """A folder the tools take for a finished run (its config and summary; no checkpoint)."""
+    from omegaconf import OmegaConf
+
+    from parallax.config import compose
+
+    run = tmp_path / "finished"
+    run.mkdir()
+    (run / "config.yaml").write_text(OmegaConf.to_yaml(compose(TINY), resolve=True))
+    (run / "summary.json").write_text("{}\n")
+    (run / "metrics.jsonl").write_text("")
+    return run
+
+
+def _refused(capsys, exit_, prefix: str, folder: Path, pid: int) -> str:
+    assert exit_.value.code == 2
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith(
+        f"{prefix} {folder} is being written by {_holder_words(pid)}"
+    ), lines
+    return lines[0]
+
+
+def test_the_tools_refuse_a_folder_another_process_writes(finished, tmp_path, capsys):
+    from parallax.tools.evaluate import main as evaluate
+    from parallax.tools.replay import main as replay
+    from parallax.tools.report.compact import main as compact
+
+    target = tmp_path / "replayed" / finished.name / "default"
+    holders = [_hold(finished), _hold(target)]
+    try:
+        before = _snapshot(tmp_path)
+        with pytest.raises(SystemExit) as exit_:
+            evaluate([str(finished), "--distances", "4.0", "--between", "--greedy-only"])
+        line = _refused(capsys, exit_, "parallax-eval: error:", finished, holders[0].pid)
+        assert line.endswith("; wait for it to end, or write elsewhere with --out DIR")
+        with pytest.raises(SystemExit) as exit_:
+            replay([str(finished), "--out", str(tmp_path / "replayed")])
+        line = _refused(capsys, exit_, "parallax-replay: error:", target, holders[1].pid)
+        assert line.endswith("; wait for it to end, or choose another --out")
+        with pytest.raises(SystemExit) as exit_:
+            compact([str(finished)])
+        line = _refused(capsys, exit_, "[compact] error:", finished, holders[0].pid)
+        assert line.endswith("; wait for it to end")
+        assert _snapshot(tmp_path) == before
+    finally:
+        for proc in holders:
+            proc.kill()
+            proc.wait()
 
 
 # --- parallax-train ----------------------------------------------------------------------------
