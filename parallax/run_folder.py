@@ -33,6 +33,9 @@ from pathlib import Path
 LOCK_NAME = "parallax.lock"
 
 _HOST = socket.gethostname()
+#: The folders whose locks this process holds. It never opens their lock files again: where
+#: flock is emulated by POSIX locks (NFS), closing any descriptor of the file would release it.
+_MINE: set[Path] = set()
 #: the mode a plain open() would give a new file (mkstemp's is 0600)
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -155,6 +158,7 @@ class RunLock:
         data = (json.dumps(record) + "\n").encode("utf-8")
         os.ftruncate(fd, 0)
         os.pwrite(fd, data, 0)
+        _MINE.add(self.folder)
         return self
 
     def _lock(self, fd: int) -> str | None:
@@ -187,6 +191,7 @@ class RunLock:
         if self.fd is None:
             return
         fd, self.fd = self.fd, None
+        _MINE.discard(self.folder)
         try:
             if restore and self._before is not None:
                 os.ftruncate(fd, 0)
@@ -213,8 +218,10 @@ class RunLock:
 
 
 def holder(folder: str | Path) -> str | None:
-    """Who holds ``folder``'s lock, in words, or None: asked without writing anything (the
-    lock file, if there is one, is opened to read)."""
+    """Who holds ``folder``'s lock, in words, or None (none, or this process): asked without
+    writing anything (the lock file, if there is one, is opened to read)."""
+    if Path(folder).absolute() in _MINE:
+        return None
     path = Path(folder).absolute() / LOCK_NAME
     try:
         fd = os.open(path, os.O_RDONLY)
