@@ -256,7 +256,13 @@ def _hold(cfg: DictConfig, run_dir: Path, key: str = "hydra.run.dir") -> str | N
     except RunLocked as exc:
         return _locked_line(exc, key)
     _held = lock
-    error = run_directory_error(cfg, run_dir, key) or _prepare(cfg, run_dir)
+    try:
+        error = run_directory_error(cfg, run_dir, key) or _prepare(cfg, run_dir)
+    except BaseException:
+        error = None
+        _held = None
+        lock.release(restore=True)
+        raise
     if error:
         _held = None
         lock.release(restore=True)
