@@ -259,7 +259,6 @@ def _hold(cfg: DictConfig, run_dir: Path, key: str = "hydra.run.dir") -> str | N
     try:
         error = run_directory_error(cfg, run_dir, key) or _prepare(cfg, run_dir)
     except BaseException:
-        error = None
         _held = None
         lock.release(restore=True)
         raise
