@@ -8,9 +8,9 @@ trainer keeps the checkpoint before the latest one too (``checkpoint_previous.pt
 still be damaged after it was written (a full disk, an interrupted copy), and a run whose latest
 checkpoint is damaged resumes from the one before (``train.resume_from=previous``).
 
-:func:`read` is the one way in: a file that is not a whole checkpoint of this run raises
-:class:`CheckpointError`, whose message names the file and what is wrong with it, before anything
-is loaded into a model.
+:func:`read` is the one way in: a file that is not a whole checkpoint of this run, or one whose
+tensors hold numbers that are not finite, raises :class:`CheckpointError`, whose message names the
+file and what is wrong with it, before anything is loaded into a model.
 """
 
 from __future__ import annotations
@@ -151,14 +151,53 @@ class CheckpointError(ValueError):
         return (type(self), (self.path, self.problem))
 
 
+def non_finite(state: Any, where: str = "") -> str | None:
+    """The first tensor or array of ``state`` (through dicts, lists and tuples) holding numbers
+    that are not finite, in words (``experiment.policy.critic: 3 of 288 NaN``), or None. Plain
+    floats are left alone: a statistic that is NaN by definition (a loss before its first fit)
+    is one."""
+    if isinstance(state, dict):
+        items = state.items()
+    elif isinstance(state, (list, tuple)):
+        items = ((f"[{i}]", item) for i, item in enumerate(state))
+    else:
+        items = ()
+    for key, item in items:
+        at = f"{where}{key}" if str(key).startswith("[") else f"{where}.{key}".lstrip(".")
+        found = non_finite(item, at)
+        if found:
+            return found
+    if isinstance(state, torch.Tensor) and (state.is_floating_point() or state.is_complex()):
+        values = state.detach().cpu()
+        nan, inf = int(torch.isnan(values).sum()), int(torch.isinf(values).sum())
+    elif isinstance(state, np.ndarray) and state.dtype.kind in "fc":
+        nan, inf = int(np.isnan(state).sum()), int(np.isinf(state).sum())
+    else:
+        return None
+    if not nan and not inf:
+        return None
+    kinds = " and ".join(
+        f"{count} {name}" for count, name in ((nan, "NaN"), (inf, "infinite")) if count
+    )
+    return f"{where}: {kinds} of {state.size if isinstance(state, np.ndarray) else state.numel()}"
+
+
 def read(
-    path: str | Path, config: Any = None, map_location: str | torch.device = "cpu"
+    path: str | Path,
+    config: Any = None,
+    map_location: str | torch.device = "cpu",
+    finite: bool = True,
 ) -> dict[str, Any]:
     """The checkpoint at ``path``, checked: a whole torch file holding a dict with every key of
     :data:`REQUIRED_KEYS` and, when it records the settings it was trained with and ``config``
     (a composed config) is given, written with the same ones (the changes a resume may make
-    aside). Anything else raises :class:`CheckpointError`. The recorded settings come back in
-    this parallax's words (:func:`parallax.config.upgrade_saved`)."""
+    aside); and tensors and arrays of finite numbers only. The trainer writes no checkpoint
+    while its numbers are not finite, so one that holds them was damaged, but in a study of
+    divergence (``train.stop_after_non_finite=null``), whose checkpoints may hold what diverged:
+    a checkpoint that records that setting, or any with ``finite=False`` (a command continuing
+    such a study), is not checked for them. Anything else raises :class:`CheckpointError`. The
+    recorded settings come back in this parallax's words
+    (:func:`parallax.config.upgrade_saved`)."""
     from omegaconf import OmegaConf
 
     from parallax.config import changed_settings, upgrade_saved
@@ -193,7 +232,17 @@ def read(
         if changed:
             listed = "; ".join(changed[:2]) + ("; …" if len(changed) > 2 else "")
             raise CheckpointError(path, f"was written by a run with other settings ({listed})")
+    found = non_finite(state) if finite and not _studies_divergence(state) else None
+    if found:
+        raise CheckpointError(path, f"holds numbers that are not finite ({found})")
     return state
+
+
+def _studies_divergence(state: dict[str, Any]) -> bool:
+    """Whether the checkpoint's run ran on through numbers that were not finite."""
+    recorded = state.get("config")
+    train = recorded.get("train") if isinstance(recorded, dict) else None
+    return isinstance(train, dict) and train.get("stop_after_non_finite", 0) is None
 
 
 def global_rng_state() -> dict[str, Any]:

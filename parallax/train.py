@@ -12,12 +12,18 @@ over. In a sweep (-m) every job's overrides are composed first, so that a typo s
 before any job runs; each job then validates its own configuration and a bad job fails alone,
 before the trainer writes anything into its directory.
 
-The run directory is checked before Hydra writes its own record (.hydra/) into it, by
-:func:`run_directory_error`: a folder that cannot be created or written, a checkpoint that cannot
-be resumed (damaged, not a checkpoint, another run's) or a run trained with other settings end
-the command with one line and exit status 2, the folder left as it was. A sweep's job
-directories are checked the same way before its first job. A run whose numbers stop being finite
-stops with one line and exit status 1 (parallax.health).
+A run directory has one writer. A single run takes the folder's lock
+(:class:`parallax.run_folder.RunLock`) before Hydra writes its own record (.hydra/) into it, and
+then checks the folder, by :func:`run_directory_error`: a folder another process is writing, a
+folder that cannot be created or written, a checkpoint that cannot be resumed (damaged, not a
+checkpoint, another run's, holding numbers that are not finite) or a run trained with other
+settings end the command with one line and exit status 2, the folder left byte for byte as it
+was. A checkpoint about to be resumed is also loaded into the run's models then, so that one
+that does not fit them is refused before Hydra writes too; the trainer built for that check is
+the one that trains. A sweep's job directories are checked the same way (their locks looked at,
+not taken) before its first job; each job takes its own folder's lock when it starts, and a job
+whose folder was taken meanwhile fails alone. A run whose numbers stop being finite stops with
+one line and exit status 1 (parallax.health).
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ from parallax.config import (
 )
 from parallax.config.overrides import composed, parse_error
 from parallax.config.plumbing import without_hydra
+from parallax.run_folder import RunLock, RunLocked, holder
 from parallax.writable import folder_problem
 
 #: Hydra flags after which no run starts, or whose config source `compose` cannot see: Hydra
@@ -61,11 +68,31 @@ class RunRefused(CompactHydraException):
     """A sweep's job that cannot run or stopped: Hydra reports this one line, not a traceback."""
 
 
+#: The lock this process holds on its run directory (a single run: taken by :func:`main` before
+#: Hydra starts), and the trainer built to check the checkpoint it resumes (:func:`_prepare`).
+_held: RunLock | None = None
+_prepared = None
+
+
+def _holds(run_dir: Path) -> bool:
+    return _held is not None and _held.fd is not None and _held.folder == run_dir.absolute()
+
+
+def _locked_line(error: RunLocked, key: str) -> str:
+    return f"{error}; wait for it to end, or choose another folder with {key}=..."
+
+
+def _finite_only(cfg: DictConfig) -> bool:
+    """Whether a checkpoint this run resumes must hold finite numbers: always, but in a study of
+    divergence (train.stop_after_non_finite=null), whose checkpoints may hold what diverged."""
+    return cfg.train.stop_after_non_finite is not None
+
+
 def _usable(path: Path, cfg: DictConfig) -> bool:
     from parallax import checkpoint
 
     try:
-        checkpoint.read(path, config=cfg)
+        checkpoint.read(path, config=cfg, finite=_finite_only(cfg))
     except checkpoint.CheckpointError:
         return False
     return True
@@ -83,6 +110,9 @@ def run_directory_error(cfg: DictConfig, run_dir: str | Path, key: str | None = 
     if problem:
         reason = f"{problem}; choose another folder with {key}=..."
         return str(ConfigError(key, str(run_dir), reason))
+    held = None if _holds(run_dir) else holder(run_dir)
+    if held is not None:
+        return _locked_line(RunLocked(run_dir.absolute(), held), key)
     latest, previous = run_dir / checkpoint.CHECKPOINT_NAME, run_dir / checkpoint.PREVIOUS_NAME
     present = [path for path in (latest, previous) if path.exists()]
     if present and not cfg.resume:
@@ -120,7 +150,7 @@ def run_directory_error(cfg: DictConfig, run_dir: str | Path, key: str | None = 
             reason = f"{run_dir} has no {checkpoint.PREVIOUS_NAME} to resume from"
             return str(ConfigError("train.resume_from", "previous", reason))
         try:
-            checkpoint.read(previous, config=cfg)
+            checkpoint.read(previous, config=cfg, finite=_finite_only(cfg))
         except checkpoint.CheckpointError as exc:
             return f"{exc}; move the checkpoints aside to start afresh"
         return None
@@ -130,7 +160,7 @@ def run_directory_error(cfg: DictConfig, run_dir: str | Path, key: str | None = 
             "resume from it with train.resume_from=previous, or move it aside to start afresh"
         )
     try:
-        checkpoint.read(latest, config=cfg)
+        checkpoint.read(latest, config=cfg, finite=_finite_only(cfg))
     except checkpoint.CheckpointError as exc:
         if previous.exists() and _usable(previous, cfg):
             return (
@@ -165,12 +195,15 @@ def _output_dir(cfg: DictConfig, multirun: bool, job: int = 0) -> Path:
     return (sweep / str(OmegaConf.select(cfg, "hydra.sweep.subdir"))).absolute()
 
 
-def check_command_line(argv: Sequence[str]) -> str | None:
+def check_command_line(argv: Sequence[str], hold: bool = False) -> str | None:
     """The one-line error for a command line that cannot run, or None (Hydra takes it from here).
 
     A single run is composed and validated; a sweep's jobs are composed (each validates itself
     when it runs, so that a bad job fails alone). Then the run directory of each is checked
-    (:func:`run_directory_error`), before Hydra writes anything.
+    (:func:`run_directory_error`), before Hydra writes anything. With ``hold`` (parallax-train
+    itself), a single run's folder is locked first and stays locked for the run (:data:`_held`),
+    and a checkpoint it resumes is loaded into its models (:func:`_prepare`); a refusal gives
+    the lock back and leaves the folder as it was.
     """
     from hydra._internal.utils import get_args_parser
 
@@ -192,7 +225,12 @@ def check_command_line(argv: Sequence[str]) -> str | None:
         return error
     if not args.multirun:
         cfg, error = composed(overrides, check=True, with_hydra=True)
-        return error or run_directory_error(without_hydra(cfg), _output_dir(cfg, False))
+        if error:
+            return error
+        task, run_dir = without_hydra(cfg), _output_dir(cfg, False)
+        if not hold:
+            return run_directory_error(task, run_dir)
+        return _hold(task, run_dir)
     jobs = _sweep_jobs(overrides)
     for job, job_overrides in enumerate(jobs or []):
         cfg, error = composed(list(job_overrides), check=False, with_hydra=True)
@@ -205,13 +243,88 @@ def check_command_line(argv: Sequence[str]) -> str | None:
     return None
 
 
+def _hold(cfg: DictConfig, run_dir: Path, key: str = "hydra.run.dir") -> str | None:
+    """Lock ``run_dir`` for this process, check it and, for a resume, load its checkpoint into
+    the run's models; the error line (the lock given back, the folder as it was) or None."""
+    global _held
+    problem = folder_problem(run_dir)  # a folder the lock cannot be made in is named as such
+    if problem:
+        return run_directory_error(cfg, run_dir, key)
+    lock = RunLock(run_dir, program="parallax-train")
+    try:
+        lock.acquire()
+    except RunLocked as exc:
+        return _locked_line(exc, key)
+    _held = lock
+    try:
+        error = run_directory_error(cfg, run_dir, key) or _prepare(cfg, run_dir)
+    except BaseException:
+        _held = None
+        lock.release(restore=True)
+        raise
+    if error:
+        _held = None
+        lock.release(restore=True)
+    return error
+
+
+def _prepare(cfg: DictConfig, run_dir: Path) -> str | None:
+    """For a run that resumes, its trainer, built and loaded from the checkpoint (kept in
+    :data:`_prepared` for :func:`train`); the error line for a checkpoint that does not fit the
+    models, or None. Nothing is written."""
+    global _prepared
+    from parallax import checkpoint
+    from parallax.trainer import Trainer
+
+    latest = str(cfg.train.resume_from) == "latest"
+    name = checkpoint.CHECKPOINT_NAME if latest else checkpoint.PREVIOUS_NAME
+    if not cfg.resume or not (run_dir / name).exists():
+        return None
+    _quiet_libraries()
+    trainer = Trainer(cfg, run_dir)
+    try:
+        trainer.load_checkpoint()
+    except checkpoint.CheckpointError as exc:
+        trainer.exp.close()
+        previous = run_dir / checkpoint.PREVIOUS_NAME
+        if latest and previous.exists() and _usable(previous, cfg):
+            return (
+                f"{exc}; resume from the one before with train.resume_from=previous, or move "
+                "the checkpoints aside to start afresh"
+            )
+        return f"{exc}; move it aside to start afresh"
+    _prepared = trainer
+    return None
+
+
+def _quiet_libraries() -> None:
+    # Hydra logs INFO to the console; the renderer's libraries announce themselves at that level
+    # when they are imported (by the trainer).
+    for noisy in ("absl", "OpenGL"):
+        logging.getLogger(noisy).setLevel(logging.WARNING)
+
+
+def _trainer_for(cfg: DictConfig, run_dir: Path):
+    """The trainer :func:`_prepare` built for this run, if it was built with this very config;
+    else a new one."""
+    global _prepared
+    from parallax.trainer import Trainer
+
+    prepared, _prepared = _prepared, None
+    if prepared is not None:
+        same = OmegaConf.to_container(prepared.cfg, resolve=True) == OmegaConf.to_container(
+            cfg, resolve=True
+        )
+        if same and prepared.run_dir == run_dir:
+            return prepared
+        prepared.exp.close()
+    return Trainer(cfg, run_dir)
+
+
 @hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name=CONFIG_NAME, version_base="1.3")
 def train(cfg: DictConfig) -> float:
     """Train one run in Hydra's run directory; returns the final eye-movement MAE (for sweepers)."""
-    # Hydra logs INFO to the console; the renderer's libraries announce themselves at that level
-    # when they are imported (below).
-    for noisy in ("absl", "OpenGL"):
-        logging.getLogger(noisy).setLevel(logging.WARNING)
+    _quiet_libraries()
 
     # In a sweep a bad job must fail alone: exiting would take the launcher's worker (and with
     # joblib every other job) down with it, so raise (Hydra reports the one line: ConfigError is
@@ -230,20 +343,38 @@ def train(cfg: DictConfig) -> float:
             raise
         _fail(str(exc))
     run_dir = Path(HydraConfig.get().runtime.output_dir)
-    # main() asked this before Hydra wrote into the folder; a sweep's job asks it again, as its
-    # launcher may run it much later or requeue it
-    error = run_directory_error(cfg, run_dir, key="hydra.sweep.dir" if in_sweep else None)
-    if error:
-        refuse(error)
+    lock = None
+    if not _holds(run_dir):
+        # a sweep's job (or a caller other than main()): main() checked the folder before the
+        # sweep; the job takes its lock and asks again, as its launcher may run it much later
+        # or requeue it
+        lock = RunLock(run_dir, program="parallax-train")
+        key = "hydra.sweep.dir" if in_sweep else "hydra.run.dir"
+        try:
+            lock.acquire()
+        except RunLocked as exc:
+            refuse(_locked_line(exc, key))
+        error = run_directory_error(cfg, run_dir, key=key)
+        if error:
+            lock.release(restore=True)
+            refuse(error)
+    try:
+        return _train(cfg, run_dir, refuse)
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _train(cfg: DictConfig, run_dir: Path, refuse) -> float:
     from parallax import checkpoint
     from parallax.health import Diverged
-    from parallax.trainer import Trainer, format_summary
+    from parallax.trainer import format_summary
 
     print(f"[parallax] run directory: {run_dir}", flush=True)
-    trainer = Trainer(cfg, run_dir)
+    trainer = _trainer_for(cfg, run_dir)
     try:
         summary = trainer.fit()
-    except checkpoint.CheckpointError as exc:  # one that reads but does not fit the models
+    except checkpoint.CheckpointError as exc:  # a sweep's job: one that does not fit the models
         refuse(f"{exc}; move it aside to start afresh")
     except Diverged as exc:
         refuse(str(exc), status=1)
@@ -255,10 +386,14 @@ def train(cfg: DictConfig) -> float:
 
 def main() -> None:
     register_resolvers()
-    error = check_command_line(sys.argv[1:])
+    error = check_command_line(sys.argv[1:], hold=True)
     if error:
         _fail(error)
-    train()
+    try:
+        train()
+    finally:
+        if _held is not None:
+            _held.release()
 
 
 if __name__ == "__main__":

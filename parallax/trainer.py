@@ -11,6 +11,8 @@ Tables 4–5). Everything a run writes lives in its run directory:
     checkpoint.pt     the latest checkpoint (atomic), and checkpoint_previous.pt the one before
     summary.json      the final summary (and the one before the perturbation)
     diverged.json     instead of a summary, for a run stopped as its numbers stopped being finite
+    parallax.lock     while a command writes the folder: who (parallax.run_folder, whose lock
+                      parallax-train takes before it builds this trainer)
 
 After each presentation :mod:`parallax.health` reads its record: a diverging critic is named
 once, and numbers that stopped being finite hold back the checkpoints and, in the end, stop the
@@ -45,6 +47,7 @@ from parallax.panel import panel_frames, watched
 from parallax.parts import Parts
 from parallax.presentation import Presentation
 from parallax.record import PresentationRecord
+from parallax.run_folder import remove_leftovers, write_atomic
 from parallax.run_log import RunLog
 from parallax.watch import Watch
 
@@ -52,6 +55,17 @@ from parallax.watch import Watch
 #: (and each trial's end), this wide in pixels; few and small, so that drawing them costs a
 #: small share of the presentations between.
 PANEL_FRAMES, PANEL_WIDTH = 24, 640
+
+#: The files of a run written through a temporary file and a rename.
+_WRITTEN = (
+    checkpoint.CHECKPOINT_NAME,
+    checkpoint.PREVIOUS_NAME,
+    checkpoint.BEFORE_PERTURBATION_NAME,
+    "metrics.jsonl",
+    "summary.json",
+    RUN_CONFIG_NAME,
+    DIVERGED_NAME,
+)
 
 
 class Trainer:
@@ -84,6 +98,7 @@ class Trainer:
         self.keep_latest = True
         # the last checkpoint written or resumed from, and its presentation
         self.saved: tuple[Path, int] | None = None
+        self.loaded = False  # whether the checkpoint of train.resume_from is loaded
 
     # --- paths -----------------------------------------------------------------------------
     @property
@@ -135,11 +150,25 @@ class Trainer:
     def restore(self) -> bool:
         """Continue from the checkpoint of train.resume_from, if there is one; drop log lines
         written after it. A checkpoint that cannot be used raises checkpoint.CheckpointError."""
+        if not self.load_checkpoint():
+            return False
+        self._trim_record()
+        return True
+
+    def load_checkpoint(self) -> bool:
+        """Load the checkpoint of train.resume_from into the run's models and counters, if there
+        is one, writing nothing; whether there was. Asked twice, it loads once. A checkpoint that
+        cannot be used (:func:`parallax.checkpoint.read`, or whose parts do not fit the models)
+        raises checkpoint.CheckpointError."""
+        if self.loaded:
+            return True
         path = self.resume_path
         if not path.exists():
             return False
-        # map_location=cpu: load_state_dict copies onto the run's device
-        state = checkpoint.read(path, config=self.cfg, map_location="cpu")
+        # map_location=cpu: load_state_dict copies onto the run's device. Numbers that are not
+        # finite are refused, but in a study of divergence, whose checkpoints may hold them.
+        finite = self.cfg.train.stop_after_non_finite is not None
+        state = checkpoint.read(path, config=self.cfg, map_location="cpu", finite=finite)
         try:
             self.exp.load_state_dict(state["experiment"])
             self.eye.load_state_dict(state["eye"])
@@ -158,18 +187,25 @@ class Trainer:
         self.last_distance_stats = state["last_distance_stats"]
         checkpoint.set_global_rng_state(state["global_rng"])
         self.keep_latest, self.saved = path == self.checkpoint_path, (path, self.presentation)
-        found = record_file(self.metrics_path)
-        if found is not None:
-            kept = [
-                line
-                for line in read_record(self.metrics_path).splitlines()
-                if _presentation_of(line) <= self.presentation
-            ]
-            self.metrics_path.write_text("".join(line + "\n" for line in kept))
-            # a compacted record goes on as the plain file the log appends to
-            if found != self.metrics_path:
-                found.unlink()
+        self.loaded = True
         return True
+
+    def _trim_record(self) -> None:
+        """metrics.jsonl up to the checkpoint's presentation: the lines written after it, and a
+        line torn by a kill in the middle of its write, dropped (atomically: a kill now leaves
+        the record as it was)."""
+        found = record_file(self.metrics_path)
+        if found is None:
+            return
+        kept = [
+            line
+            for line in read_record(self.metrics_path).splitlines()
+            if _presentation_of(line) <= self.presentation
+        ]
+        write_atomic(self.metrics_path, "".join(line + "\n" for line in kept))
+        # a compacted record goes on as the plain file the log appends to
+        if found != self.metrics_path:
+            found.unlink()
 
     # --- one presentation ------------------------------------------------------------------
     def step_presentation(
@@ -303,7 +339,7 @@ class Trainer:
                     # §5's first phase, when the run got past it, is a result all the same
                     stop["before_perturbation"] = self.before_perturbation
                     mark = json.dumps(stop, indent=2) + "\n"
-                    (self.run_dir / DIVERGED_NAME).write_text(mark)
+                    write_atomic(self.run_dir / DIVERGED_NAME, mark)
                     message = self.health.stop_message(self.presentation, self.saved)
                     log.writer.add_text("health", message, self.steps)
                     raise Diverged(message)
@@ -313,7 +349,7 @@ class Trainer:
                 if not holding and (due or self.presentation == total):
                     self.save()
         summary = self.summary()
-        self.summary_path.write_text(json.dumps(summary, indent=2) + "\n")
+        write_atomic(self.summary_path, json.dumps(summary, indent=2) + "\n")
         return summary
 
     def _panel(self, watch: Watch, pres: Presentation) -> list:
@@ -328,6 +364,9 @@ class Trainer:
         record the config, and set the switches of where the run stands; whether it resumed."""
         resumed = bool(self.cfg.resume) and self.restore()
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        # what a writer killed in the middle of a write left (parallax-train holds the folder's
+        # lock: no one else is writing)
+        remove_leftovers(self.run_dir, _WRITTEN)
         # a run that goes on from its last good checkpoint is no longer over
         (self.run_dir / DIVERGED_NAME).unlink(missing_ok=True)
         if not resumed:  # a start from scratch: no lines of an earlier start without a checkpoint
@@ -335,7 +374,7 @@ class Trainer:
                 form.unlink(missing_ok=True)
             self.metrics_path.write_text("")
         config = OmegaConf.to_yaml(self.cfg, resolve=True)
-        (self.run_dir / RUN_CONFIG_NAME).write_text(config)
+        write_atomic(self.run_dir / RUN_CONFIG_NAME, config)
         if self.perturbed:
             self.exp.set_perturbation(True)
         self.exp.set_growth(self.grown)

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
+import torch
 
 from parallax import checkpoint
 from parallax.train import check_command_line
@@ -57,6 +58,14 @@ def _without_eye(state: dict) -> dict:
     return state
 
 
+def _nan_policy(state: dict) -> dict:
+    """The policy's tensors overwritten with NaN: a file that loads and has every part."""
+    for value in state["experiment"]["policy"].values():
+        if isinstance(value, torch.Tensor) and value.is_floating_point():
+            value.fill_(float("nan"))
+    return state
+
+
 #: name → (how the checkpoint is damaged, what the line says about it)
 DAMAGES = {
     "truncated": (lambda data, state: data[:3000], "is truncated or damaged (3000 bytes;"),
@@ -67,6 +76,10 @@ DAMAGES = {
     "other_run": (
         lambda data, state: _other_settings(state),
         "was written by a run with other settings (coder.atoms: 16 → 32)",
+    ),
+    "nan": (
+        lambda data, state: _nan_policy(state),
+        "holds numbers that are not finite (experiment.policy.",
     ),
 }
 
@@ -122,6 +135,67 @@ def test_parallax_train_leaves_the_folder_of_a_damaged_checkpoint_as_it_was(run,
     assert _snapshot(run) == before
 
 
+def _no_config(state: dict) -> dict:
+    """Another version's checkpoint: no settings recorded, and a part the models lack."""
+    del state["config"], state["experiment"]["policy"]
+    return state
+
+
+#: Every reason a resume is refused: name → (what is done to the run, extra overrides, the
+#: start of the line after "parallax-train: error: " with RUN for the run's folder)
+REFUSALS = {
+    "truncated": ("truncated", [], "RUN/checkpoint.pt is truncated or damaged (3000 bytes;"),
+    "foreign": ("text", [], "RUN/checkpoint.pt is not a torch checkpoint"),
+    "other_run": ("other_run", [], "RUN/checkpoint.pt was written by a run with other settings"),
+    "non_finite": ("nan", [], "RUN/checkpoint.pt holds numbers that are not finite (experiment."),
+    "not_fitting": (
+        _no_config,
+        [],
+        "RUN/checkpoint.pt does not fit this run's models (KeyError: 'policy')",
+    ),
+    "changed_config": (
+        None,
+        ["coder.learning_rate=0.3"],
+        "resume=true: cannot resume RUN, it was trained with other settings "
+        "(coder.learning_rate: 0.01 → 0.3)",
+    ),
+}
+
+
+@pytest.mark.parametrize("reason", sorted(REFUSALS))
+def test_every_refused_resume_leaves_the_folder_byte_for_byte(run, reason, monkeypatch, capsys):
+    """parallax-train's own entry point, on the folder of a run that cannot be resumed: one line,
+    exit status 2, and not a byte of the folder changed (Hydra's .hydra/ included)."""
+    from parallax import train
+
+    damage, extra, expected = REFUSALS[reason]
+    if isinstance(damage, str):
+        _damage(run / checkpoint.CHECKPOINT_NAME, damage)
+    elif damage is not None:
+        state = damage(checkpoint.load(run / checkpoint.CHECKPOINT_NAME))
+        checkpoint.save_atomic(state, run / checkpoint.CHECKPOINT_NAME)
+    before = _snapshot(run)
+    monkeypatch.setattr(
+        sys,
+        "argv",
+        ["parallax-train", *RUN_OVERRIDES, *extra, "train.presentations=4", f"hydra.run.dir={run}"],
+    )
+    with pytest.raises(SystemExit) as exit_:
+        train.main()
+    assert exit_.value.code == 2
+    line = _one_line(capsys.readouterr().err, "parallax-train: error: ")
+    assert line.startswith("parallax-train: error: " + expected.replace("RUN", str(run))), line
+    assert _snapshot(run) == before
+    assert train._held is None and train._prepared is None
+
+
+def test_a_checkpoint_of_a_study_of_divergence_may_hold_numbers_that_are_not_finite(run):
+    _damage(run / checkpoint.CHECKPOINT_NAME, "nan")
+    command = [*RUN_OVERRIDES, f"hydra.run.dir={run}"]
+    assert "not finite" in check_command_line(command)
+    assert check_command_line([*command, "train.stop_after_non_finite=null"]) is None
+
+
 def test_resume_from_previous_needs_a_previous_checkpoint(run):
     (run / checkpoint.PREVIOUS_NAME).unlink()
     line = check_command_line(
@@ -161,7 +235,7 @@ def test_a_checkpoint_whose_parts_do_not_fit_is_named_when_restored(run):
     )
 
 
-@pytest.mark.parametrize("kind", ["truncated", "missing_key", "other_run"])
+@pytest.mark.parametrize("kind", ["truncated", "missing_key", "other_run", "nan"])
 def test_parallax_eval_names_a_damaged_checkpoint(run, kind, capsys):
     from parallax.tools.evaluate import main
 
@@ -178,16 +252,18 @@ def test_parallax_eval_names_a_damaged_checkpoint(run, kind, capsys):
     assert _snapshot(run) == before
 
 
-def test_parallax_replay_names_a_damaged_checkpoint_and_writes_nothing(run, tmp_path, capsys):
+@pytest.mark.parametrize("kind", ["text", "nan"])
+def test_parallax_replay_names_a_damaged_checkpoint_and_writes_nothing(run, tmp_path, capsys, kind):
     from parallax.tools.replay import main
 
-    _damage(run / checkpoint.CHECKPOINT_NAME, "text")
+    _damage(run / checkpoint.CHECKPOINT_NAME, kind)
     with pytest.raises(SystemExit) as exit_:
         main([str(run), "--out", str(tmp_path / "replayed")])
     assert exit_.value.code == 2
     line = _one_line(
         capsys.readouterr().err,
-        f"parallax-replay: error: {run / checkpoint.CHECKPOINT_NAME} is not a torch checkpoint",
+        f"parallax-replay: error: {run / checkpoint.CHECKPOINT_NAME} "
+        + {"text": "is not a torch checkpoint", "nan": DAMAGES["nan"][1]}[kind],
     )
     assert line.endswith("move it aside to replay without it")
     assert not (tmp_path / "replayed").exists()

@@ -15,7 +15,9 @@ presentations did (pan 0 as in the paper, or a random pan with ``env.initial_pan
 ``--start-jitter on|off`` chooses.
 
 Writes `eval.json` and figures (`eval_mae_per_position.png`, `eval_error_vs_distance.png`,
-`mae_curves.png`) into the run directory (or --out).
+`mae_curves.png`) into the run directory (or --out), holding that folder's lock
+(:mod:`parallax.run_folder`) from the start: a folder another process is writing (a run still
+training) is refused with one line, and a refused evaluation leaves the folder as it was.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from parallax.envs.stimuli import SPLITS
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
 from parallax.movement import planned_route
+from parallax.run_folder import RunLock, RunLocked, write_atomic
 from parallax.tools import plots
 from parallax.tools.report.runs import read_metrics
 from parallax.writable import folder_problem
@@ -373,7 +376,7 @@ def evaluate(
         first = next((i for i, r in enumerate(records) if r.get("perturbed")), None)
         switch = None if first is None else (records[first - 1]["steps"] if first else 0)
         plots.mae_curves(records, out_dir / "mae_curves.png", perturbation_at=switch)
-    (out_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
+    write_atomic(out_dir / "eval.json", json.dumps(result, indent=2) + "\n")
     return result
 
 
@@ -602,6 +605,17 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> None:
     # intermixed: the positional settings may come after options such as --out
     args = build_parser().parse_intermixed_args(argv)
+    # the folder written into has one writer (parallax.run_folder), locked before anything is
+    # written; one that cannot be written is named by evaluate()
+    out_dir = Path(args.out or args.run_dir)
+    lock = RunLock(out_dir, program="parallax-eval") if folder_problem(out_dir) is None else None
+    try:
+        if lock is not None:
+            lock.acquire()
+    except RunLocked as exc:
+        remedy = "wait for it to end, or write elsewhere with --out DIR"
+        print(f"parallax-eval: error: {exc}; {remedy}", file=sys.stderr)
+        sys.exit(2)
     try:
         result = evaluate(
             args.run_dir,
@@ -620,8 +634,13 @@ def main(argv: list[str] | None = None) -> None:
             split=args.split,
         )
     except (FileNotFoundError, ValueError) as exc:
+        if lock is not None:
+            lock.release(restore=True)  # refused: the folder as it was
         print(f"parallax-eval: error: {exc}", file=sys.stderr)
         sys.exit(2)
+    finally:
+        if lock is not None:
+            lock.release()
     print(format_eval(result))
 
 

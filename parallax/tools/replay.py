@@ -16,7 +16,8 @@ Each source run × each combination of the comma-separated values becomes DIR/<r
 with config.yaml (the source's, with the overrides applied), summary.json (the source's eye
 metrics, this learner's online distance errors) and, where the source has parallax-eval results
 with their eye-movement samples, the same evals with this learner's distance predictions, so
-`parallax-report DIR` tables them like runs.
+`parallax-report DIR` tables them like runs. Each of these folders has one writer
+(:mod:`parallax.run_folder`): all are locked before the first is written.
 """
 
 from __future__ import annotations
@@ -51,6 +52,7 @@ from parallax.distance_step import learn_online
 from parallax.envs.walk import walk_robots
 from parallax.metrics import DistanceErrorTracker
 from parallax.parts import body_walkers, distance_learner, truths_at, worlds
+from parallax.run_folder import RunLock, RunLocked, write_atomic
 from parallax.tools.report.groups import mean_sd
 from parallax.tools.report.runs import (
     METRICS_NAME,
@@ -450,8 +452,8 @@ def write_replay(result: dict, out_dir: Path) -> None:
                 result["config"],
             )
             checkpoint.save_atomic(state, out_dir / name)
-    (out_dir / RUN_CONFIG_NAME).write_text(OmegaConf.to_yaml(result["config"], resolve=True))
-    (out_dir / SUMMARY_NAME).write_text(json.dumps(result["summary"], indent=2) + "\n")
+    write_atomic(out_dir / RUN_CONFIG_NAME, OmegaConf.to_yaml(result["config"], resolve=True))
+    write_atomic(out_dir / SUMMARY_NAME, json.dumps(result["summary"], indent=2) + "\n")
     for relative, evaluation in result.get("evals", {}).items():
         if (
             result["summary"].get("before_perturbation") is None
@@ -462,7 +464,7 @@ def write_replay(result: dict, out_dir: Path) -> None:
                 "eval.json"  # cut at the perturbation: the before-eval is this run's final one
             )
         (out_dir / relative).parent.mkdir(parents=True, exist_ok=True)
-        (out_dir / relative).write_text(json.dumps(evaluation, indent=2) + "\n")
+        write_atomic(out_dir / relative, json.dumps(evaluation, indent=2) + "\n")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -484,6 +486,7 @@ def main(argv: list[str] | None = None) -> None:
     # Hydra's run directories have '=' in their names: what exists is a path, the rest overrides.
     paths = [s for s in args.sources if Path(s).exists()]
     overrides = [s for s in args.sources if not Path(s).exists()]
+    locks: list[RunLock] = []
     try:
         combos = parse_sweep(overrides)
         sources = find_sources(paths)
@@ -493,6 +496,10 @@ def main(argv: list[str] | None = None) -> None:
             raise ReplayError(f"--out {args.out}: {problem}; choose another folder")
         if not args.until_perturbation:
             check_checkpoints(sources)
+        # every replayed run folder has one writer (parallax.run_folder): all are locked before
+        # the first is written
+        targets = [out / s.name / run_name(",".join(c)) for s in sources for c in combos]
+        locks = _lock_all(targets)
         totals: dict[
             str, dict[str, list[float]]
         ] = {}  # combo → what was scored → one total per source
@@ -519,8 +526,27 @@ def main(argv: list[str] | None = None) -> None:
                 )
     except (ReplayError, FileNotFoundError, ValueError) as exc:
         # bad input (a folder that is no run, an override it cannot take, a stale run config)
+        for lock in locks:
+            lock.release(restore=True)  # the folders not written yet, as they were
         print(f"parallax-replay: error: {str(exc).splitlines()[0]}", file=sys.stderr)
         sys.exit(2)
+    finally:
+        for lock in locks:
+            lock.release()
+
+
+def _lock_all(folders: Sequence[Path]) -> list[RunLock]:
+    """Locks on all ``folders``, or none: a ReplayError naming the first another process holds,
+    the folders left as they were."""
+    locks: list[RunLock] = []
+    try:
+        for folder in dict.fromkeys(folders):
+            locks.append(RunLock(folder, program="parallax-replay").acquire())
+    except RunLocked as exc:
+        for lock in reversed(locks):
+            lock.release(restore=True)
+        raise ReplayError(f"{exc}; wait for it to end, or choose another --out") from None
+    return locks
 
 
 def replay_totals(result: dict) -> dict[str, float]:

@@ -129,15 +129,31 @@ def main(argv: list[str] | None = None) -> dict:
     problem = folder_problem(args.out)
     if problem:
         _fail(f"--out {args.out}: {problem}; choose another folder")
-    from parallax.trainer import Trainer
+    from parallax.run_folder import RunLock, RunLocked
 
     cfg = compose(overrides)
+    out = Path(args.out)
+    # the run folder has one writer (parallax.run_folder), this soak, from its first write on
+    lock = RunLock(out, program="python -m parallax.tools.bench.soak")
+    try:
+        lock.acquire()
+    except RunLocked as exc:
+        _fail(f"{exc}; wait for it to end, or choose another folder with --out")
+    try:
+        return soak(args, cfg, out)
+    finally:
+        lock.release()
+
+
+def soak(args: argparse.Namespace, cfg, out: Path) -> dict:
+    """Train ``cfg`` into ``out`` for at least ``args.iterations`` robot-iterations; the report."""
+    from parallax.trainer import Trainer
+
     robots = int(cfg.env.robots)
     # iterations per robot and presentation on the final lateral list (earlier stages of a
     # staged curriculum have fewer: the loop below tops the run up)
     per_presentation = len(cfg.curriculum.lateral_positions) * int(cfg.env.trial_length) * robots
     presentations = math.ceil(args.iterations / per_presentation)
-    out = Path(args.out)
     skipped, done = 0, 0
     while done < args.iterations:
         cfg.train.presentations = presentations

@@ -40,6 +40,7 @@ from typing import Any
 
 from parallax.compressed import COMPRESSED, read_record, record_file, record_forms
 from parallax.health import DIVERGED_NAME
+from parallax.run_folder import RunLock, RunLocked, probe_all
 from parallax.tools.report.runs import (
     METRICS_NAME,
     SUMMARY_NAME,
@@ -194,22 +195,34 @@ def compact(
     if keep not in KEEPS:
         raise ValueError(f"keep must be one of {', '.join(KEEPS)}, got {keep!r}")
     runs = runs_over(paths)
+    # a run with a summary may be training again (lengthened): runs another process is writing
+    # are refused before any is compacted, and each is locked while it is
+    held = probe_all(runs)
+    if held is not None:
+        raise held
     count = saved = 0
     for run in runs:
-        sizes = {}
-        metrics = record_file(run / METRICS_NAME)
-        if keep != "all" and metrics is not None:
-            sizes[run / METRICS_NAME] = metrics.stat().st_size
-            thin_metrics(run, keep)
-        for record in run_records(run):
-            before = record_file(record)
-            if before is None or before.name.endswith(suffix):
-                continue
-            size = sizes.get(record, before.stat().st_size)
-            after = compact_record(record, suffix)
-            count += 1
-            saved += size - after.stat().st_size
+        with RunLock(run, program="python -m parallax.tools.report.compact"):
+            count, saved = _compact_run(run, suffix, keep, count, saved)
     return len(runs), count, saved
+
+
+def _compact_run(run: Path, suffix: str, keep: str, count: int, saved: int) -> tuple[int, int]:
+    """:func:`compact` of one run; the running counts."""
+    sizes = {}
+    metrics = record_file(run / METRICS_NAME)
+    if keep != "all" and metrics is not None:
+        sizes[run / METRICS_NAME] = metrics.stat().st_size
+        thin_metrics(run, keep)
+    for record in run_records(run):
+        before = record_file(record)
+        if before is None or before.name.endswith(suffix):
+            continue
+        size = sizes.get(record, before.stat().st_size)
+        after = compact_record(record, suffix)
+        count += 1
+        saved += size - after.stat().st_size
+    return count, saved
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -227,6 +240,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parser.parse_args(argv)
     try:
         runs, count, saved = compact(args.paths, FORMATS[args.format], args.keep)
+    except RunLocked as exc:
+        print(f"[compact] error: {exc}; wait for it to end", file=sys.stderr)
+        raise SystemExit(2) from None
     except (ReportError, OSError) as exc:
         print(f"[compact] error: {exc}", file=sys.stderr)
         raise SystemExit(1) from None
