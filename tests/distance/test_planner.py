@@ -54,7 +54,7 @@ def planner():
 
 
 @pytest.fixture(scope="module")
-def test_sweeps():
+def held_out_sweeps():
     return synthetic(12, 0.02, seed=99)
 
 
@@ -105,8 +105,8 @@ def test_the_fit_is_cached_until_the_queue_changes():
 
 
 # --- the estimate ---------------------------------------------------------------------------------
-def test_the_estimate_reads_the_pans_in_the_visited_order(planner, test_sweeps):
-    s = test_sweeps[0][0]
+def test_the_estimate_reads_the_pans_in_the_visited_order(planner, held_out_sweeps):
+    s = held_out_sweeps[0][0]
     weights = planner.fit([0, 3]).weights
     by_hand = 1.0 / (weights @ [s[0], s[3], 1.0])
     assert planner.estimate([3, 0], [s[3], s[0]]) == pytest.approx(by_hand, rel=1e-12)
@@ -115,8 +115,8 @@ def test_the_estimate_reads_the_pans_in_the_visited_order(planner, test_sweeps):
     assert planner.estimate([3, 0], [s[0], s[3]]) != pytest.approx(by_hand, rel=1e-3)
 
 
-def test_three_positions_in_any_order_give_one_estimate(planner, test_sweeps):
-    s = test_sweeps[0][3]
+def test_three_positions_in_any_order_give_one_estimate(planner, held_out_sweeps):
+    s = held_out_sweeps[0][3]
     estimates = {
         round(planner.estimate(list(order), s[list(order)]), 12)
         for order in itertools.permutations([0, 2, 3])
@@ -124,9 +124,9 @@ def test_three_positions_in_any_order_give_one_estimate(planner, test_sweeps):
     assert len(estimates) == 1
 
 
-def test_a_full_plan_estimates_within_a_few_percent(planner, test_sweeps):
+def test_a_full_plan_estimates_within_a_few_percent(planner, held_out_sweeps):
     errors = []
-    for s, d in zip(*test_sweeps):
+    for s, d in zip(*held_out_sweeps):
         visited, estimate = planner.plan(s)
         assert estimate == pytest.approx(planner.estimate(visited, s[visited]), rel=1e-12)
         errors.append(100 * abs(estimate - d) / d)
@@ -158,9 +158,9 @@ def test_the_expected_error_falls_back_to_all_rows_when_the_bin_is_empty():
 
 
 # --- where to move and when to stop -------------------------------------------------------------
-def test_with_no_price_the_planner_moves_while_it_helps(planner, test_sweeps):
+def test_with_no_price_the_planner_moves_while_it_helps(planner, held_out_sweeps):
     lengths = []
-    for s in test_sweeps[0]:
+    for s in held_out_sweeps[0]:
         visited, _ = planner.plan(s)
         lengths.append(len(visited))
         # each step it took lowered the expected error near the estimate it had then
@@ -178,18 +178,18 @@ def test_with_no_price_the_planner_moves_while_it_helps(planner, test_sweeps):
     assert min(lengths) >= 2 and max(lengths) == len(LATERAL)
 
 
-def test_with_a_huge_price_per_trial_it_stops_after_one_position(test_sweeps):
+def test_with_a_huge_price_per_trial_it_stops_after_one_position(held_out_sweeps):
     planner = planner_for(price_per_trial=1.0e6)
-    for s in test_sweeps[0]:
+    for s in held_out_sweeps[0]:
         visited, _ = planner.plan(s)
         assert visited == [len(LATERAL) - 1]
 
 
-def test_a_price_per_trial_shortens_the_routes(planner, test_sweeps):
+def test_a_price_per_trial_shortens_the_routes(planner, held_out_sweeps):
     cheap = planner_for(price_per_trial=0.0)
     dear = planner_for(price_per_trial=0.3)
-    cheap_lengths = [len(cheap.plan(s)[0]) for s in test_sweeps[0]]
-    dear_lengths = [len(dear.plan(s)[0]) for s in test_sweeps[0]]
+    cheap_lengths = [len(cheap.plan(s)[0]) for s in held_out_sweeps[0]]
+    dear_lengths = [len(dear.plan(s)[0]) for s in held_out_sweeps[0]]
     assert all(a >= b for a, b in zip(cheap_lengths, dear_lengths))
     assert sum(dear_lengths) < sum(cheap_lengths)
 
@@ -201,12 +201,12 @@ def test_with_more_noise_at_small_l_the_first_position_is_the_largest_l():
     assert singles == sorted(singles, reverse=True)
 
 
-def test_a_price_per_cm_makes_it_prefer_smaller_l(test_sweeps):
+def test_a_price_per_cm_makes_it_prefer_smaller_l(held_out_sweeps):
     free = planner_for(price_per_cm=0.0)
     dear = planner_for(price_per_cm=1.0)
     assert free.next_position([], []) == len(LATERAL) - 1
     assert dear.next_position([], []) == 0
-    for s in test_sweeps[0]:
+    for s in held_out_sweeps[0]:
         free_route, dear_route = free.plan(s)[0], dear.plan(s)[0]
         assert max(dear_route) < max(free_route)
         assert dear_route == [0]
@@ -219,9 +219,9 @@ def test_the_price_counts_trials_and_the_travel_out_and_back():
     assert planner.price([3, 0]) == pytest.approx(2 * 0.5 + 0.01 * 2 * 20)
 
 
-def test_next_position_never_revisits_and_stops_when_all_are_visited(planner, test_sweeps):
+def test_next_position_never_revisits_and_stops_when_all_are_visited(planner, held_out_sweeps):
     rng = np.random.default_rng(7)
-    s = test_sweeps[0][5]
+    s = held_out_sweeps[0][5]
     for size in range(len(LATERAL)):
         for _ in range(4):
             visited = [int(k) for k in rng.permutation(len(LATERAL))[:size]]
@@ -231,8 +231,8 @@ def test_next_position_never_revisits_and_stops_when_all_are_visited(planner, te
     assert planner.next_position(everything, s[everything]) is None
 
 
-def test_a_plan_visits_each_position_at_most_once(planner, test_sweeps):
-    for s in test_sweeps[0]:
+def test_a_plan_visits_each_position_at_most_once(planner, held_out_sweeps):
+    for s in held_out_sweeps[0]:
         visited, _ = planner.plan(s)
         assert 1 <= len(visited) == len(set(visited)) <= len(LATERAL)
 
@@ -249,22 +249,22 @@ def test_is_ready_after_queue_size_observations_and_keeps_the_newest():
     np.testing.assert_array_equal(planner.distances, distances[::-1][:5])
 
 
-def test_a_state_dict_round_trip_gives_identical_plans(planner, test_sweeps):
+def test_a_state_dict_round_trip_gives_identical_plans(planner, held_out_sweeps):
     copy = MovementPlanner(
         LATERAL, queue_size=planner.queue_size, price_per_trial=planner.price_per_trial
     )
     copy.load_state_dict(planner.state_dict())
     assert copy.is_ready
-    for s in test_sweeps[0]:
+    for s in held_out_sweeps[0]:
         assert copy.plan(s) == planner.plan(s)
     # the state is a copy both ways: writing into it changes neither planner
     state = planner.state_dict()
     fresh = MovementPlanner(LATERAL, queue_size=planner.queue_size)
     fresh.load_state_dict(state)
-    before = fresh.plan(test_sweeps[0][0])
+    before = fresh.plan(held_out_sweeps[0][0])
     state["inputs"][:] = 0.0
     state["distances"][:] = 1.0
-    assert fresh.plan(test_sweeps[0][0]) == before
+    assert fresh.plan(held_out_sweeps[0][0]) == before
     assert planner.inputs.any() and (planner.distances != 1.0).any()
 
 
