@@ -27,12 +27,16 @@ from parallax.record import PresentationRecord
 
 class RunLog:
     """The run's logs from presentation ``done`` of ``total`` on; a context manager. A resumed
-    run (``resumed``) appends, and TensorBoard drops what was written after ``step``."""
+    run (``resumed``) appends, and TensorBoard drops what was written after ``step``, the last
+    checkpointed presentation's, which it keeps; a fresh start drops every earlier point."""
 
     def __init__(self, run_dir: Path, cfg: DictConfig, done: int, step: int, resumed: bool) -> None:
         self.total, self.trials = int(cfg.train.presentations), int(cfg.metrics.summary_trials)
         self.metrics = (run_dir / "metrics.jsonl").open("a")
-        self.writer = SummaryWriter(str(run_dir / "tb"), purge_step=step if resumed else None)
+        # TensorBoard hides every event at or after purge_step: the checkpointed presentation's
+        # own point at ``step`` stays, since nothing writes it again
+        purge = step + 1 if resumed else 0
+        self.writer = SummaryWriter(str(run_dir / "tb"), purge_step=purge)
         if not resumed:
             self.writer.add_text("config", "```yaml\n" + OmegaConf.to_yaml(cfg) + "\n```", 0)
         self.interactive = sys.stderr.isatty()
@@ -45,6 +49,13 @@ class RunLog:
             dynamic_ncols=True,
         )
         self.print_every = max(1, self.total // 20)
+        if resumed and done >= self.total:
+            print(
+                f"[parallax] {run_dir} is finished: it holds {done} presentations "
+                f"(train.presentations={self.total}), nothing to train; raise "
+                "train.presentations to go on",
+                flush=True,
+            )
 
     def __enter__(self) -> RunLog:
         return self
