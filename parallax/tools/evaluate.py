@@ -25,6 +25,7 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -47,6 +48,7 @@ from parallax.experiment import Experiment
 from parallax.metrics import position_label
 from parallax.movement import planned_route
 from parallax.tools import plots
+from parallax.tools.console import footer, header, progress
 from parallax.tools.report.runs import read_metrics
 from parallax.writable import folder_problem
 
@@ -65,9 +67,11 @@ def run_jobs(
     greedy: bool,
     readout: str = "last",
     route: Callable | None = None,
+    bar: Any = None,
 ) -> dict[str, np.ndarray]:
     """Run one frozen presentation per (distance, texture) job, B robots at a time (with
-    ``route``, Experiment.run_presentation's, one robot on the route it plans)."""
+    ``route``, Experiment.run_presentation's, one robot on the route it plans); ``bar``, a
+    progress bar, moves on by each batch's jobs."""
     pans, other_pans, targets, dists, starts, routes = [], {}, [], [], [], []
     B = exp.robots
     for start in range(0, len(jobs), B):
@@ -83,6 +87,8 @@ def run_jobs(
         targets.append(pres.targets[: len(batch)])
         dists.append(pres.distances[: len(batch)])
         starts.append(pres.start_pans[: len(batch)])
+        if bar is not None:
+            bar.update(len(batch))
     return {
         "pans": np.concatenate(pans),
         "pans_by_readout": {name: np.concatenate(v) for name, v in other_pans.items()},
@@ -302,8 +308,25 @@ def evaluate(
             for k in range(textures)
         ]
         labels = [position_label(l) for l in exp.lateral_positions]
+        modes = (("greedy", True), ("sampled", False)) if sampled else (("greedy", True),)
+        planning = exp.planner is not None and exp.planner.is_ready
+        trials = len(jobs) * (len(modes) + planning) + len(between or [])
+        header(
+            "parallax-eval",
+            f"frozen trials of {ckpt_path.resolve()}",
+            presentations=int(state["presentation"]),
+            perturbed="yes (§5's rotation and blur)" if perturbed else "no",
+            photographs=f"{split} split, {textures} per distance",
+            trials=f"{trials} ({len(distances)} distances, {', '.join(m for m, _ in modes)}"
+            + (f", {len(between)} between grid points" if between else "")
+            + (", the planned route" if planning else "")
+            + f"; {robots} robot{'s' * (robots > 1)} at a time)",
+            output=out_dir.resolve(),
+        )
+        bar = progress(total=trials, desc="trials", unit="trial")
         result: dict = {
-            "run_dir": str(run_dir),
+            # absolute, so that the analyses find the run from any working directory
+            "run_dir": str(run_dir.resolve()),
             "checkpoint": checkpoint_name,
             "presentations": int(state["presentation"]),
             "readout": readout,
@@ -324,9 +347,8 @@ def evaluate(
         # the worlds' random streams (textures aside: forced; the jittered start pans) as the
         # checkpoint left them, for the planned routes to start from as the sweeps did
         start_streams = [env.task.random.get_state() for env in exp.envs]
-        modes = (("greedy", True), ("sampled", False)) if sampled else (("greedy", True),)
         for mode, greedy in modes:
-            runs[mode] = run = run_jobs(exp, jobs, greedy, readout)
+            runs[mode] = run = run_jobs(exp, jobs, greedy, readout, bar=bar)
             err = np.abs(run["pans"] - run["targets"])
             result["mae_per_position"][mode] = {
                 k: float(v) for k, v in zip(labels, err.mean(axis=0))
@@ -336,7 +358,7 @@ def evaluate(
         between_run = None
         if between:
             between_jobs = [(d, i % n_tex) for i, d in enumerate(between)]
-            between_run = run_jobs(exp, between_jobs, True, readout)
+            between_run = run_jobs(exp, between_jobs, True, readout, bar=bar)
         # The greedy eye's vectors s, kept whether or not this run's learner is ready, so that
         # parallax-replay can score other distance learners on exactly these eye movements.
         result["greedy_samples"] = {
@@ -360,12 +382,13 @@ def evaluate(
             for name in READOUT_PANS
         }
         curves = {}
-        if exp.planner is not None and exp.planner.is_ready:
+        if planning:
             # the planning robot's own routes, greedy, on the grid's presentations
             key = READOUT_PANS[readout]
             for env, stream in zip(exp.envs, start_streams, strict=True):
                 env.task.random.set_state(stream)
-            routed = run_jobs(exp, jobs, True, readout, route=planned_route(exp.planner, key))
+            route = planned_route(exp.planner, key)
+            routed = run_jobs(exp, jobs, True, readout, route=route, bar=bar)
             estimates = [
                 exp.planner.estimate(v, s[v]) for v, s in zip(routed["routes"], routed["pans"])
             ]
@@ -391,6 +414,7 @@ def evaluate(
                 )
                 pb = result["distance_between_grid"]["per_distance"]
                 curves["between grid points"] = ([float(k) for k in pb], list(pb.values()))
+        bar.close()
     finally:
         exp.close()
 
@@ -404,6 +428,9 @@ def evaluate(
         switch = None if first is None else (records[first - 1]["steps"] if first else 0)
         plots.mae_curves(records, out_dir / "mae_curves.png", perturbation_at=switch)
     (out_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
+    written = ["eval.json", "eval_mae_per_position.png"]
+    written += ["eval_error_vs_distance.png"] * bool(curves) + ["mae_curves.png"] * bool(records)
+    footer("parallax-eval", written, out_dir)
     return result
 
 
@@ -485,7 +512,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--between",
-        type=float,
+        type=_distance_or_none,
         nargs="*",
         default=[3.05, 4.47, 5.55, 7.33, 8.81, 9.95],
         help="extra distances between grid points (default: a few; none to skip)",
@@ -544,9 +571,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _distance_or_none(text: str) -> float | None:
+    """A distance of --between, or None for ``none``."""
+    if text.lower() == "none":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a distance in metres nor none: {text!r}") from None
+
+
 def main(argv: list[str] | None = None) -> None:
     # intermixed: the positional settings may come after options such as --out
-    args = build_parser().parse_intermixed_args(argv)
+    parser = build_parser()
+    args = parser.parse_intermixed_args(argv)
+    if None in args.between:  # --between none
+        if len(args.between) > 1:
+            parser.error("--between: none stands alone, without distances")
+        args.between = []
     try:
         result = evaluate(
             args.run_dir,
