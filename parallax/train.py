@@ -249,7 +249,8 @@ def train(cfg: DictConfig) -> float:
         refuse(str(exc), status=1)
     finally:
         trainer.exp.close()
-    print(format_summary(summary), flush=True)
+    experiment = HydraConfig.get().runtime.choices.get("experiment")
+    print(format_summary(summary, experiment), flush=True)
     return float(summary["mae"])
 
 

@@ -101,7 +101,17 @@ def test_cli_writes_run_like_folders(perturbed_run, tmp_path, capsys):
     assert written == ["distance.queue_size=3", "distance.queue_size=4"]
     cfg = load_run_config(next((tmp_path / "out").rglob("distance.queue_size=4")))
     assert cfg.distance.queue_size == 4
-    assert "distance error" in capsys.readouterr().out
+    printed = capsys.readouterr()
+    assert "distance error" in printed.out
+    # what it does and on what, and where each replay went (stderr, beside the results)
+    err = printed.err.splitlines()
+    assert (
+        err[0]
+        == "[parallax-replay] the distance learner re-run on the eye movements of 1 finished run"
+    )
+    assert "[parallax-replay]   overrides: distance.queue_size=3 | distance.queue_size=4" in err
+    out = (tmp_path / "out").resolve()
+    assert f"[parallax-replay] wrote {out / perturbed_run.name / 'distance.queue_size=4'}" in err
     # parallax-report reads the replays as runs and tables the factor that varies
     from parallax.tools.report.build import build_report
 
