@@ -15,6 +15,9 @@ from typing import Any, TextIO
 
 from tqdm import tqdm
 
+#: The files a footer names before it counts the rest.
+SHOWN = 8
+
 
 class _Lines:
     """A stream for tqdm off a terminal: each redraw as a line of its own."""
@@ -51,18 +54,22 @@ def progress(iterable: Iterable | None = None, total: int | None = None, desc: s
         file=sys.stderr if interactive else _Lines(sys.stderr),
         dynamic_ncols=interactive,
         mininterval=0.5 if interactive else 15.0,
+        # off a terminal, a step that ends within seconds leaves no line behind
+        delay=0.0 if interactive else 5.0,
         **kw,
     )
 
 
 def footer(tool: str, paths: Iterable[str | Path], folder: str | Path | None = None) -> None:
-    """``[tool] wrote A, B to FOLDER`` (absolute), or ``[tool] wrote PATH`` per file."""
+    """``[tool] wrote A, B to FOLDER`` (absolute; paths relative to it), or ``[tool] wrote
+    PATH`` per file."""
     paths = [Path(p) for p in paths]
     if not paths:
         return
     if folder is not None:
-        names = ", ".join(p.name for p in paths)
-        line = f"[{tool}] wrote {names} to {Path(folder).resolve()}"
+        names = [p.name if p.is_absolute() else str(p) for p in paths]
+        more = f" and {len(names) - SHOWN} more" if len(names) > SHOWN else ""
+        line = f"[{tool}] wrote {', '.join(names[:SHOWN])}{more} to {Path(folder).resolve()}"
     else:
         line = "\n".join(f"[{tool}] wrote {p.resolve()}" for p in paths)
     print(line, file=sys.stderr, flush=True)
