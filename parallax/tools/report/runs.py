@@ -308,7 +308,7 @@ def eval_run_dir(eval_dir: str | Path, stored: str) -> Path:
     kept it), else the evaluation's own folder or the one above it (an eval kept beside or
     inside its run, wherever the two were moved)."""
     eval_dir, path = Path(eval_dir), Path(stored)
-    for candidate in (path, eval_dir, eval_dir.parent):
+    for candidate in ([path] if stored else []) + [eval_dir, eval_dir.parent]:
         if (candidate / "config.yaml").is_file():
             return candidate
     raise FileNotFoundError(
