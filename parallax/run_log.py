@@ -94,11 +94,15 @@ class RunLog:
                 dist=f"{distance:.2f}%" if distance is not None else "-",
             )
             self.bar.update(1)
-        elif record.presentation % self.print_every == 0 or record.presentation == self.total:
-            print(
+        if record.presentation % self.print_every == 0 or record.presentation == self.total:
+            line = (
                 f"[parallax] presentation {record.presentation}/{self.total}  "
                 f"steps/s {steps_per_second:.0f}  MAE {record.mae:.3f}° "
                 f"(last {self.trials} trials {record.mae_recent:.3f}°)  distance error "
-                + (f"{distance:.2f}%" if distance is not None else "-"),
-                flush=True,
+                + (f"{distance:.2f}%" if distance is not None else "-")
             )
+            # above the bar on a terminal, so that train.log, which keeps no bar, has it too
+            if self.interactive:
+                self.bar.write(line)
+            else:
+                print(line, flush=True)

@@ -33,6 +33,7 @@ from hydra.errors import CompactHydraException
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf, open_dict, read_write
 
+from parallax import transcript
 from parallax.config import (
     CONFIG_MODULE,
     CONFIG_NAME,
@@ -239,6 +240,8 @@ def train(cfg: DictConfig) -> float:
     from parallax.health import Diverged
     from parallax.trainer import Trainer, format_summary
 
+    # what the terminal gets, the run's train.log gets too (released by Hydra's job callback)
+    transcript.keep(run_dir / f"{HydraConfig.get().job.name}.log", f"[{run_dir.name}] " * in_sweep)
     print(f"[parallax] run directory: {run_dir}", flush=True)
     trainer = Trainer(cfg, run_dir)
     try:
@@ -259,7 +262,12 @@ def main() -> None:
     error = check_command_line(sys.argv[1:])
     if error:
         _fail(error)
-    train()
+    try:
+        train()
+    finally:
+        summary = transcript.sweep_summary()  # a sweep's jobs, each in a line
+        if summary:
+            print(summary, flush=True)
 
 
 if __name__ == "__main__":
