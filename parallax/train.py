@@ -257,8 +257,24 @@ def train(cfg: DictConfig) -> float:
     return float(summary["mae"])
 
 
+def print_help(argv: Sequence[str]) -> None:
+    """`parallax-train [OVERRIDES] --help`: parallax.config.help's text for the composed config
+    of these overrides (a bad one: its one line, exit 2)."""
+    from parallax.config.help import help_text
+
+    overrides = [a for a in argv if not a.startswith("-")]
+    error = parse_error(overrides)
+    cfg, error = (None, error) if error else composed(overrides, check=False)
+    if error:
+        _fail(error)
+    print(help_text(cfg, overrides))
+
+
 def main() -> None:
     register_resolvers()
+    if {"--help", "-h"} & set(sys.argv[1:]):  # the settings described, not Hydra's bare tree
+        print_help(sys.argv[1:])
+        return
     error = check_command_line(sys.argv[1:])
     if error:
         _fail(error)
