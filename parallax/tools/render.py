@@ -112,7 +112,12 @@ def write_pictures(out_dir: str | Path, **options) -> list[Path]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="parallax-render", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default="docs", help="folder for the PNGs (default: docs)")
+    parser.add_argument(
+        "--out",
+        default=".",
+        help="folder for the PNGs (default: the working directory; the README's pictures: "
+        "--out docs --lateral 0.2 --texture 8)",
+    )
     parser.add_argument(
         "--distance", type=float, default=3.0, help="panel distance d in metres (default 3)"
     )
