@@ -458,17 +458,12 @@ def format_eval(result: dict) -> str:
     if result.get("start_jitter") and "mae_by_start" in result:
         for mode, m in result["mae_by_start"].items():
             lines.append(
-                f"{mode} MAE of trials that started short of α* {m['started_short']:.3f}°, past it "
-                f"{m['started_past']:.3f}° ({100 * m['share_started_past']:.0f} % of trials)"
+                f"{mode} MAE of trials that started short of α* {_shown(m['started_short'])}, "
+                f"past it {_shown(m['started_past'])} "
+                f"({100 * m['share_started_past']:.0f} % of trials)"
             )
     if "distance" in result:
-        lines.append(
-            "distance error (%): "
-            + "  ".join(
-                f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
-                for k, v in result["distance"]["by_range"].items()
-            )
-        )
+        lines.append("distance error (%): " + _ranges(result["distance"]["by_range"]))
     if "route" in result:
         route = result["route"]
         lines.append(
@@ -478,13 +473,22 @@ def format_eval(result: dict) -> str:
         )
     if "distance_between_grid" in result:
         lines.append(
-            "between grid points (%): "
-            + "  ".join(
-                f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
-                for k, v in result["distance_between_grid"]["by_range"].items()
-            )
+            "between grid points (%): " + _ranges(result["distance_between_grid"]["by_range"])
         )
     return "\n".join(lines)
+
+
+def _shown(degrees: float | None) -> str:
+    """An MAE in degrees, or – where no trial had it (NaN, null)."""
+    return "–" if degrees is None or degrees != degrees else f"{degrees:.3f}°"
+
+
+def _ranges(by_range: dict) -> str:
+    """``3-4.9 m: 1.23  …  total: 1.00``; a range no distance fell in says so."""
+    return "  ".join(
+        f"{k}{'' if k == 'total' else ' m'}: " + ("no panel" if v is None or v != v else f"{v:.2f}")
+        for k, v in by_range.items()
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
