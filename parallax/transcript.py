@@ -1,7 +1,7 @@
 """A training job's lines, kept and named: what `parallax-train` prints also goes to the job's
-log (Hydra's ``train.log`` in the run directory), and in a sweep (-m) every line starts with the
-job's run name, so that jobs running side by side (joblib) can be told apart. At the end of a
-sweep, :func:`sweep_summary` names each job's outcome.
+log (Hydra's ``train.log`` in the run directory, :func:`keep`), and in a sweep (-m) every line
+starts with the job's run name, so that jobs running side by side (joblib) can be told apart. At
+the end of a sweep, :func:`sweep_summary` names each job's outcome.
 
 The log gets whole lines only: a progress bar's redraws (carriage returns) stay on the terminal,
 and the trainer writes its progress line there as well (parallax.run_log).
@@ -112,10 +112,11 @@ def sweep_summary() -> str | None:
             lines.append(f"[sweep]   {job.name}: {run.problem or 'no summary.json'}")
             continue
         finished += 1
-        total = (summary.get("distance_error") or {}).get("total")
+        total, mae = (summary.get("distance_error") or {}).get("total"), summary.get("mae")
         lines.append(
-            f"[sweep]   {job.name}: {summary['presentations']} presentations, MAE "
-            f"{summary['mae']:.3f}°, distance error "
+            f"[sweep]   {job.name}: {summary.get('presentations')} presentations, MAE "
+            + (f"{mae:.3f}°" if mae is not None else "–")
+            + ", distance error "
             + (f"{total:.2f} %" if total is not None else "not yet (queue not full)")
         )
     head = f"[sweep] {folder}: {len(jobs)} jobs, {finished} finished, {len(jobs) - finished} not"
