@@ -8,8 +8,10 @@ last ``window`` trials — over all positions together and per position.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -103,3 +105,15 @@ class DistanceErrorTracker:
 
     def load_state_dict(self, state: dict) -> None:
         self.pairs = deque((tuple(p) for p in state["pairs"]), maxlen=self.window)
+
+
+def finite_or_none(value: Any) -> Any:
+    """``value`` with every float that is not finite (a range no panel fell in, a position not
+    yet visited) as None: strict JSON, which has no NaN, for summary.json."""
+    if isinstance(value, dict):
+        return {k: finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_or_none(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

@@ -37,12 +37,16 @@ def can_write_video() -> bool:
 
 class RunLog:
     """The run's logs from presentation ``done`` of ``total`` on; a context manager. A resumed
-    run (``resumed``) appends, and TensorBoard drops what was written after ``step``."""
+    run (``resumed``) appends, and TensorBoard drops what was written after ``step``, the last
+    checkpointed presentation's, which it keeps; a fresh start drops every earlier point."""
 
     def __init__(self, run_dir: Path, cfg: DictConfig, done: int, step: int, resumed: bool) -> None:
         self.total, self.trials = int(cfg.train.presentations), int(cfg.metrics.summary_trials)
         self.metrics = (run_dir / "metrics.jsonl").open("a")
-        self.writer = SummaryWriter(str(run_dir / "tb"), purge_step=step if resumed else None)
+        # TensorBoard hides every event at or after purge_step: the checkpointed presentation's
+        # own point at ``step`` stays, since nothing writes it again
+        purge = step + 1 if resumed else 0
+        self.writer = SummaryWriter(str(run_dir / "tb"), purge_step=purge)
         if not resumed:
             self.writer.add_text("config", "```yaml\n" + OmegaConf.to_yaml(cfg) + "\n```", 0)
         self.interactive = sys.stderr.isatty()
@@ -55,6 +59,13 @@ class RunLog:
             dynamic_ncols=True,
         )
         self.print_every = max(1, self.total // 20)
+        if resumed and done >= self.total:
+            print(
+                f"[parallax] {run_dir} is finished: it holds {done} presentations "
+                f"(train.presentations={self.total}), nothing to train; raise "
+                "train.presentations to go on",
+                flush=True,
+            )
 
     def __enter__(self) -> RunLog:
         return self
@@ -102,11 +113,15 @@ class RunLog:
                 dist=f"{distance:.2f}%" if distance is not None else "-",
             )
             self.bar.update(1)
-        elif record.presentation % self.print_every == 0 or record.presentation == self.total:
-            print(
+        if record.presentation % self.print_every == 0 or record.presentation == self.total:
+            line = (
                 f"[parallax] presentation {record.presentation}/{self.total}  "
                 f"steps/s {steps_per_second:.0f}  MAE {record.mae:.3f}° "
                 f"(last {self.trials} trials {record.mae_recent:.3f}°)  distance error "
-                + (f"{distance:.2f}%" if distance is not None else "-"),
-                flush=True,
+                + (f"{distance:.2f}%" if distance is not None else "-")
             )
+            # above the bar on a terminal, so that train.log, which keeps no bar, has it too
+            if self.interactive:
+                self.bar.write(line)
+            else:
+                print(line, flush=True)

@@ -39,6 +39,7 @@ from hydra.errors import CompactHydraException
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf, open_dict, read_write
 
+from parallax import transcript
 from parallax.config import (
     CONFIG_MODULE,
     CONFIG_NAME,
@@ -359,17 +360,19 @@ def train(cfg: DictConfig) -> float:
             lock.release(restore=True)
             refuse(error)
     try:
-        return _train(cfg, run_dir, refuse)
+        return _train(cfg, run_dir, refuse, in_sweep)
     finally:
         if lock is not None:
             lock.release()
 
 
-def _train(cfg: DictConfig, run_dir: Path, refuse) -> float:
+def _train(cfg: DictConfig, run_dir: Path, refuse, in_sweep: bool) -> float:
     from parallax import checkpoint
     from parallax.health import Diverged
     from parallax.trainer import format_summary
 
+    # what the terminal gets, the run's train.log gets too (released by Hydra's job callback)
+    transcript.keep(run_dir / f"{HydraConfig.get().job.name}.log", f"[{run_dir.name}] " * in_sweep)
     print(f"[parallax] run directory: {run_dir}", flush=True)
     trainer = _trainer_for(cfg, run_dir)
     try:
@@ -380,12 +383,29 @@ def _train(cfg: DictConfig, run_dir: Path, refuse) -> float:
         refuse(str(exc), status=1)
     finally:
         trainer.exp.close()
-    print(format_summary(summary), flush=True)
+    experiment = HydraConfig.get().runtime.choices.get("experiment")
+    print(format_summary(summary, experiment), flush=True)
     return float(summary["mae"])
+
+
+def print_help(argv: Sequence[str]) -> None:
+    """`parallax-train [OVERRIDES] --help`: parallax.config.help's text for the composed config
+    of these overrides (a bad one: its one line, exit 2)."""
+    from parallax.config.help import help_text
+
+    overrides = [a for a in argv if not a.startswith("-")]
+    error = parse_error(overrides)
+    cfg, error = (None, error) if error else composed(overrides, check=False)
+    if error:
+        _fail(error)
+    print(help_text(cfg, overrides))
 
 
 def main() -> None:
     register_resolvers()
+    if {"--help", "-h"} & set(sys.argv[1:]):  # the settings described, not Hydra's bare tree
+        print_help(sys.argv[1:])
+        return
     error = check_command_line(sys.argv[1:], hold=True)
     if error:
         _fail(error)
@@ -394,6 +414,9 @@ def main() -> None:
     finally:
         if _held is not None:
             _held.release()
+        summary = transcript.sweep_summary()  # a sweep's jobs, each in a line
+        if summary:
+            print(summary, flush=True)
 
 
 if __name__ == "__main__":

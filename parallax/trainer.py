@@ -41,7 +41,12 @@ from parallax.config import (
 from parallax.distance_step import distance_step
 from parallax.experiment import Experiment
 from parallax.health import DIVERGED_NAME, Diverged, Health
-from parallax.metrics import DistanceErrorTracker, EyeMovementTracker, position_label
+from parallax.metrics import (
+    DistanceErrorTracker,
+    EyeMovementTracker,
+    finite_or_none,
+    position_label,
+)
 from parallax.movement import movement
 from parallax.panel import panel_frames, watched
 from parallax.parts import Parts
@@ -348,8 +353,8 @@ class Trainer:
                 due = self.presentation % int(self.cfg.train.checkpoint_every) == 0
                 if not holding and (due or self.presentation == total):
                     self.save()
-        summary = self.summary()
-        write_atomic(self.summary_path, json.dumps(summary, indent=2) + "\n")
+        summary = finite_or_none(self.summary())  # strict JSON: null, never NaN
+        write_atomic(self.summary_path, json.dumps(summary, indent=2, allow_nan=False) + "\n")
         return summary
 
     def _panel(self, watch: Watch, pres: Presentation) -> list:
@@ -402,27 +407,47 @@ def _presentation_of(line: str) -> float:
         return float("inf")
 
 
-def format_summary(summary: dict) -> str:
-    """The final table printed at the end of a run."""
+def format_summary(summary: dict, experiment: str | None = None) -> str:
+    """The final table printed at the end of a run (``experiment``: the experiment= it ran)."""
+    which = f"experiment={experiment}" if experiment else "the schema's defaults (no experiment)"
     lines = [
-        f"parallax — {summary['curriculum']}, seed {summary['seed']}, "
+        f"parallax — {which}, curriculum {summary['curriculum']}, seed {summary['seed']}, "
         f"{summary['presentations']} presentations, {summary['steps']} iterations per robot"
     ]
-    lines.append(f"{'position (cm)':>14} {'MAE (window)':>13} {'last-trials mean (var)':>24}")
+    last = "last-trials mean, ° (var, °²)"
+    lines.append(f"{'position (cm)':>14} {'MAE (°, window)':>16} {last:>30}")
     for label, mae in summary["mae_per_position"].items():
-        lt = summary["last_trials"][label]
-        lines.append(f"{label:>14} {mae:>13.3f} {lt['mean']:>15.3f} ({lt['var']:.3f})")
-    lines.append(f"{'all':>14} {summary['mae']:>13.3f}")
-    if summary["distance_error"]:
+        lt = summary["last_trials"].get(label) or {}
         lines.append(
-            "distance error (%): "
-            + "  ".join(
-                f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
-                for k, v in summary["distance_error"].items()
-            )
+            f"{label:>14} {_number(mae, '.3f'):>16} {_number(lt.get('mean'), '.3f'):>21} "
+            f"({_number(lt.get('var'), '.3f')})"
         )
-    else:
-        lines.append("distance error: not yet (the queue of the distance learner is not full)")
+    lines.append(f"{'all':>14} {_number(summary['mae'], '.3f'):>16}")
+    lines.append(_distance_line("distance error (%)", summary["distance_error"]))
+    if "route_distance_error" in summary:  # a planned run: its routes' own estimates
+        lines.append(
+            _distance_line("planned route's distance error (%)", summary["route_distance_error"])
+        )
     t = summary["timing"]
     lines.append(f"wall time {t['wall_time_s']:.0f} s, {t['steps_per_second']:.0f} steps/s")
     return "\n".join(lines)
+
+
+def _number(value: float | None, spec: str) -> str:
+    """``value`` formatted, or – where there is none (null, NaN: no trial, no panel there)."""
+    if value is None or value != value:
+        return "–"
+    return format(value, spec)
+
+
+def _distance_line(title: str, by_range: dict) -> str:
+    """``title: 3-4.9 m: 1.23  …  total: 1.00``; a range no panel fell in says so."""
+    if not by_range:
+        return f"{title}: not yet (the queue of the distance learner is not full)"
+    parts = []
+    for k, v in by_range.items():
+        text = _number(v, ".2f")
+        parts.append(
+            f"{k if k == 'total' else f'{k} m'}: {'no panel yet' if text == '–' else text}"
+        )
+    return f"{title}: " + "  ".join(parts)

@@ -68,7 +68,7 @@ def test_a_run_driven_to_overflow_stops_with_one_line_and_keeps_its_last_good_ch
 ):
     run = tmp_path / "run"
     # §5's perturbation at presentation 2, before the numbers stop being finite
-    perturbed = [*DIVERGING, "perturbation.start_fraction=0.25"]
+    perturbed = [*DIVERGING, "perturbation=rotate_blur", "perturbation.start_fraction=0.25"]
     command = [sys.executable, "-m", "parallax.train", *perturbed, f"hydra.run.dir={run}"]
     proc = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert proc.returncode == 1, proc.stderr

@@ -158,6 +158,16 @@ def test_joblib_sweep_runs_two_jobs(tmp_path, tiny_overrides):
     assert [summaries[k]["seed"] for k in ("seed=0", "seed=1")] == [0, 1]
     assert all(s["presentations"] == 6 for s in summaries.values())
     assert summaries["seed=0"]["mae_per_position"] != summaries["seed=1"]["mae_per_position"]
+    # each job's lines carry its run's name; its train.log has them as the terminal had
+    for name in ("seed=0", "seed=1"):
+        assert f"[{name}] [parallax] presentation 6/6 " in out
+        log = (sweep_dir / name / "train.log").read_text()
+        assert "[parallax] presentation 6/6 " in log and f"[{name}]" not in log
+        assert "parallax — the schema's defaults (no experiment), curriculum" in log
+    # and the sweep sums up at its end
+    tail = out.rstrip().splitlines()[-3:]
+    assert tail[0] == f"[sweep] {sweep_dir}: 2 jobs, 2 finished, 0 not"
+    assert tail[1].startswith("[sweep]   seed=0: 6 presentations, MAE ")
 
 
 def _children(pid: int) -> list[int]:
@@ -334,6 +344,8 @@ def test_a_bad_job_fails_alone_in_a_joblib_sweep(tmp_path, tiny_overrides):
     summaries = _summaries(sweep_dir)  # … but the valid job ran to its end
     assert list(summaries) == ["distance.queue_size=3"]
     assert summaries["distance.queue_size=3"]["presentations"] == 6
+    assert f"[sweep] {sweep_dir}: 2 jobs, 1 finished, 1 not" in proc.stdout
+    assert "[sweep]   distance.queue_size=0: failed before training started" in proc.stdout
 
 
 @pytest.mark.parametrize("script", ["ablation_y.sh", "ablation_queue.sh"])

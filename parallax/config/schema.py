@@ -37,8 +37,11 @@ ROBOT_UPDATES = ("each", "mean")
 class DistanceGridConfig:
     """Panel distances drawn per presentation, metres: start, start + step, …, stop (§4.1)."""
 
+    #: Nearest panel distance (m).
     start: float = 3.0
+    #: Farthest panel distance (m).
     stop: float = 10.0
+    #: Spacing of the distances (m).
     step: float = 0.1
 
 
@@ -140,9 +143,13 @@ class ScaleSpecConfig:
     """One scale of §3.3 / Fig. 5: centre window, Gaussian-pyramid sub-sampling P_s, patch side
     P_l and the patches' stride, all in pixels."""
 
+    #: Side of the centre window cut from the eye image (px).
     window: int = MISSING
+    #: P_s, the Gaussian pyramid's sub-sampling factor of the window.
     subsample: int = MISSING
+    #: P_l, the side of a square patch of the sub-sampled window (px).
     patch: int = MISSING
+    #: Step between neighbouring patches (px of the sub-sampled window).
     stride: int = MISSING
 
 
@@ -275,9 +282,13 @@ class SensitivityConfig:
 class LevenbergMarquardtConfig:
     """The network's Levenberg–Marquardt fit (§3.5, [33]), with MATLAB trainlm's μ schedule."""
 
+    #: μ, the damping the first step starts from (trainlm's mu).
     mu: float = 1.0e-3
+    #: μ is multiplied by this after a step that lowered the error (trainlm's mu_dec).
     mu_decrease: float = 0.1
+    #: μ is multiplied by this after a step that did not (trainlm's mu_inc).
     mu_increase: float = 10.0
+    #: The fit stops when μ grows past this (trainlm's mu_max).
     mu_max: float = 1.0e10
     #: Stop when ‖Jᵀe‖ falls below this.
     min_grad: float = 1.0e-7

@@ -454,6 +454,14 @@ def _perturbation(check: _Checks) -> None:
             f"the perturbation (camera_rotation_deg={rotation:g}, blur_sigma={blur:g}) would "
             "never be switched on; give a fraction of train.presentations, or perturbation=none",
         )
+    if start is not None and rotation == 0 and blur == 0:
+        # it would still keep a checkpoint and a summary "before" a perturbation that never comes
+        check.fail(
+            "perturbation.start_fraction",
+            start,
+            "switches on a perturbation that changes nothing (camera_rotation_deg=0, "
+            "blur_sigma=0); set it to null, or choose perturbation=rotate_blur",
+        )
 
 
 def validate_stimuli(cfg: DictConfig) -> None:

@@ -27,6 +27,7 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -50,6 +51,7 @@ from parallax.metrics import position_label
 from parallax.movement import planned_route
 from parallax.run_folder import RunLock, RunLocked, write_atomic
 from parallax.tools import plots
+from parallax.tools.console import footer, header, progress
 from parallax.tools.report.runs import read_metrics
 from parallax.writable import folder_problem
 
@@ -68,9 +70,11 @@ def run_jobs(
     greedy: bool,
     readout: str = "last",
     route: Callable | None = None,
+    bar: Any = None,
 ) -> dict[str, np.ndarray]:
     """Run one frozen presentation per (distance, texture) job, B robots at a time (with
-    ``route``, Experiment.run_presentation's, one robot on the route it plans)."""
+    ``route``, Experiment.run_presentation's, one robot on the route it plans); ``bar``, a
+    progress bar, moves on by each batch's jobs."""
     pans, other_pans, targets, dists, starts, routes = [], {}, [], [], [], []
     B = exp.robots
     for start in range(0, len(jobs), B):
@@ -86,6 +90,8 @@ def run_jobs(
         targets.append(pres.targets[: len(batch)])
         dists.append(pres.distances[: len(batch)])
         starts.append(pres.start_pans[: len(batch)])
+        if bar is not None:
+            bar.update(len(batch))
     return {
         "pans": np.concatenate(pans),
         "pans_by_readout": {name: np.concatenate(v) for name, v in other_pans.items()},
@@ -266,8 +272,25 @@ def evaluate(
             for k in range(textures)
         ]
         labels = [position_label(l) for l in exp.lateral_positions]
+        modes = (("greedy", True), ("sampled", False)) if sampled else (("greedy", True),)
+        planning = exp.planner is not None and exp.planner.is_ready
+        trials = len(jobs) * (len(modes) + planning) + len(between or [])
+        header(
+            "parallax-eval",
+            f"frozen trials of {ckpt_path.resolve()}",
+            presentations=int(state["presentation"]),
+            perturbed="yes (§5's rotation and blur)" if perturbed else "no",
+            photographs=f"{split} split, {textures} per distance",
+            trials=f"{trials} ({len(distances)} distances, {', '.join(m for m, _ in modes)}"
+            + (f", {len(between)} between grid points" if between else "")
+            + (", the planned route" if planning else "")
+            + f"; {robots} robot{'s' * (robots > 1)} at a time)",
+            output=out_dir.resolve(),
+        )
+        bar = progress(total=trials, desc="trials", unit="trial")
         result: dict = {
-            "run_dir": str(run_dir),
+            # absolute, so that the analyses find the run from any working directory
+            "run_dir": str(run_dir.resolve()),
             "checkpoint": checkpoint_name,
             "presentations": int(state["presentation"]),
             "readout": readout,
@@ -288,9 +311,8 @@ def evaluate(
         # the worlds' random streams (textures aside: forced; the jittered start pans) as the
         # checkpoint left them, for the planned routes to start from as the sweeps did
         start_streams = [env.task.random.get_state() for env in exp.envs]
-        modes = (("greedy", True), ("sampled", False)) if sampled else (("greedy", True),)
         for mode, greedy in modes:
-            runs[mode] = run = run_jobs(exp, jobs, greedy, readout)
+            runs[mode] = run = run_jobs(exp, jobs, greedy, readout, bar=bar)
             err = np.abs(run["pans"] - run["targets"])
             result["mae_per_position"][mode] = {
                 k: float(v) for k, v in zip(labels, err.mean(axis=0))
@@ -300,7 +322,7 @@ def evaluate(
         between_run = None
         if between:
             between_jobs = [(d, i % n_tex) for i, d in enumerate(between)]
-            between_run = run_jobs(exp, between_jobs, True, readout)
+            between_run = run_jobs(exp, between_jobs, True, readout, bar=bar)
         # The greedy eye's vectors s, kept whether or not this run's learner is ready, so that
         # parallax-replay can score other distance learners on exactly these eye movements.
         result["greedy_samples"] = {
@@ -324,12 +346,13 @@ def evaluate(
             for name in READOUT_PANS
         }
         curves = {}
-        if exp.planner is not None and exp.planner.is_ready:
+        if planning:
             # the planning robot's own routes, greedy, on the grid's presentations
             key = READOUT_PANS[readout]
             for env, stream in zip(exp.envs, start_streams, strict=True):
                 env.task.random.set_state(stream)
-            routed = run_jobs(exp, jobs, True, readout, route=planned_route(exp.planner, key))
+            route = planned_route(exp.planner, key)
+            routed = run_jobs(exp, jobs, True, readout, route=route, bar=bar)
             estimates = [
                 exp.planner.estimate(v, s[v]) for v, s in zip(routed["routes"], routed["pans"])
             ]
@@ -364,6 +387,7 @@ def evaluate(
                 )
                 pb = result["distance_between_grid"]["per_distance"]
                 curves["between grid points"] = ([float(k) for k in pb], list(pb.values()))
+        bar.close()
     finally:
         exp.close()
 
@@ -377,6 +401,9 @@ def evaluate(
         switch = None if first is None else (records[first - 1]["steps"] if first else 0)
         plots.mae_curves(records, out_dir / "mae_curves.png", perturbation_at=switch)
     write_atomic(out_dir / "eval.json", json.dumps(result, indent=2) + "\n")
+    written = ["eval.json", "eval_mae_per_position.png"]
+    written += ["eval_error_vs_distance.png"] * bool(curves) + ["mae_curves.png"] * bool(records)
+    footer("parallax-eval", written, out_dir)
     return result
 
 
@@ -481,24 +508,16 @@ def format_eval(result: dict) -> str:
     if result.get("start_jitter") and "mae_by_start" in result:
         for mode, m in result["mae_by_start"].items():
             lines.append(
-                f"{mode} MAE of trials that started short of α* {m['started_short']:.3f}°, past it "
-                f"{m['started_past']:.3f}° ({100 * m['share_started_past']:.0f} % of trials)"
+                f"{mode} MAE of trials that started short of α* {_shown(m['started_short'])}, "
+                f"past it {_shown(m['started_past'])} "
+                f"({100 * m['share_started_past']:.0f} % of trials)"
             )
     if "distance" in result:
-        lines.append(
-            "distance error (%): "
-            + "  ".join(
-                f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
-                for k, v in result["distance"]["by_range"].items()
-            )
-        )
+        lines.append("distance error (%): " + _ranges(result["distance"]["by_range"]))
     if "distance_sampled" in result:
         lines.append(
             "distance error of the sampled policy's eye (%): "
-            + "  ".join(
-                f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
-                for k, v in result["distance_sampled"]["by_range"].items()
-            )
+            + _ranges(result["distance_sampled"]["by_range"])
         )
     if "route" in result:
         route = result["route"]
@@ -509,13 +528,22 @@ def format_eval(result: dict) -> str:
         )
     if "distance_between_grid" in result:
         lines.append(
-            "between grid points (%): "
-            + "  ".join(
-                f"{k}{'' if k == 'total' else ' m'}: {v:.2f}"
-                for k, v in result["distance_between_grid"]["by_range"].items()
-            )
+            "between grid points (%): " + _ranges(result["distance_between_grid"]["by_range"])
         )
     return "\n".join(lines)
+
+
+def _shown(degrees: float | None) -> str:
+    """An MAE in degrees, or – where no trial had it (NaN, null)."""
+    return "–" if degrees is None or degrees != degrees else f"{degrees:.3f}°"
+
+
+def _ranges(by_range: dict) -> str:
+    """``3-4.9 m: 1.23  …  total: 1.00``; a range no distance fell in says so."""
+    return "  ".join(
+        f"{k}{'' if k == 'total' else ' m'}: " + ("no panel" if v is None or v != v else f"{v:.2f}")
+        for k, v in by_range.items()
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -543,7 +571,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--between",
-        type=float,
+        type=_distance_or_none,
         nargs="*",
         default=[3.05, 4.47, 5.55, 7.33, 8.81, 9.95],
         help="extra distances between grid points (default: a few; none to skip)",
@@ -602,9 +630,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _distance_or_none(text: str) -> float | None:
+    """A distance of --between, or None for ``none``."""
+    if text.lower() == "none":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a distance in metres nor none: {text!r}") from None
+
+
 def main(argv: list[str] | None = None) -> None:
     # intermixed: the positional settings may come after options such as --out
-    args = build_parser().parse_intermixed_args(argv)
+    parser = build_parser()
+    args = parser.parse_intermixed_args(argv)
+    if None in args.between:  # --between none
+        if len(args.between) > 1:
+            parser.error("--between: none stands alone, without distances")
+        args.between = []
     # the folder written into has one writer (parallax.run_folder), locked before anything is
     # written; one that cannot be written is named by evaluate()
     out_dir = Path(args.out or args.run_dir)

@@ -111,7 +111,12 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="a run directory, for --video (the pictures need none)",
     )
-    parser.add_argument("--out", default="docs", help="folder for the PNGs (default: docs)")
+    parser.add_argument(
+        "--out",
+        default=".",
+        help="folder for the PNGs (default: the working directory; the README's pictures: "
+        "--out docs --lateral 0.2 --texture 8)",
+    )
     parser.add_argument(
         "--distance",
         type=float,

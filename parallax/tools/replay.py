@@ -31,6 +31,7 @@ import sys
 from collections.abc import Iterable, Sequence
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import torch
 from omegaconf import DictConfig, OmegaConf
@@ -50,9 +51,10 @@ from parallax.config import (
 )
 from parallax.distance_step import learn_online
 from parallax.envs.walk import walk_robots
-from parallax.metrics import DistanceErrorTracker
+from parallax.metrics import DistanceErrorTracker, finite_or_none
 from parallax.parts import body_walkers, distance_learner, truths_at, worlds
 from parallax.run_folder import RunLock, RunLocked, write_atomic
+from parallax.tools.console import footer, header, progress
 from parallax.tools.report.groups import mean_sd
 from parallax.tools.report.runs import (
     METRICS_NAME,
@@ -125,14 +127,18 @@ def read_stream(run_dir: Path) -> list[dict]:
 
 
 def replay(
-    run_dir: str | Path, overrides: Sequence[str] = (), until_perturbation: bool = False
+    run_dir: str | Path,
+    overrides: Sequence[str] = (),
+    until_perturbation: bool = False,
+    bar: Any = None,
 ) -> dict:
     """The source run's summary with the distance learner re-run under `overrides`.
 
     ``until_perturbation``: if the run was perturbed, replay only the presentations before §5's
     perturbation and present the result as a run of that length without one (config and summary
     alike), so that the ablation tables of parallax-report compare the unperturbed models (Table 4,
-    not Table 5). A run never perturbed is replayed whole.
+    not Table 5). A run never perturbed is replayed whole. ``bar``: a progress bar that moves on
+    by each presentation replayed.
     """
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
@@ -175,6 +181,8 @@ def replay(
     before_grown = False
     fits: list[tuple[int, float, float]] = []  # (presentation, epochs, stopped by max_fail)
     for record in records[: int(summary["presentations"])]:
+        if bar is not None:
+            bar.update(1)
         if record["perturbed"] and before is None:
             before = tracker.by_range()
             before_learner = copy.deepcopy(
@@ -453,7 +461,8 @@ def write_replay(result: dict, out_dir: Path) -> None:
             )
             checkpoint.save_atomic(state, out_dir / name)
     write_atomic(out_dir / RUN_CONFIG_NAME, OmegaConf.to_yaml(result["config"], resolve=True))
-    write_atomic(out_dir / SUMMARY_NAME, json.dumps(result["summary"], indent=2) + "\n")
+    summary = finite_or_none(result["summary"])  # strict JSON, as the trainer's
+    write_atomic(out_dir / SUMMARY_NAME, json.dumps(summary, indent=2, allow_nan=False) + "\n")
     for relative, evaluation in result.get("evals", {}).items():
         if (
             result["summary"].get("before_perturbation") is None
@@ -503,19 +512,37 @@ def main(argv: list[str] | None = None) -> None:
         totals: dict[
             str, dict[str, list[float]]
         ] = {}  # combo → what was scored → one total per source
+        lengths = {
+            s: int(json.loads((s / SUMMARY_NAME).read_text())["presentations"]) for s in sources
+        }
+        header(
+            "parallax-replay",
+            f"the distance learner re-run on the eye movements of {len(sources)} finished run"
+            + "s" * (len(sources) != 1),
+            overrides=" | ".join(" ".join(c) or "(as trained)" for c in combos),
+            presentations=f"{sum(lengths.values())} per setting"
+            + (", up to the perturbation" if args.until_perturbation else ""),
+            output=out.resolve(),
+        )
+        bar = progress(total=sum(lengths.values()) * len(combos), desc="presentations")
+        written = []
         for source in sources:
             for combo in combos:
                 target = out / source.name / run_name(",".join(combo))
-                result = replay(source, combo, until_perturbation=args.until_perturbation)
+                start = bar.n
+                result = replay(source, combo, args.until_perturbation, bar)
+                bar.update(start + lengths[source] - bar.n)  # the rest, if cut at the perturbation
                 write_replay(result, target)
+                written.append(target)
                 scored, label = replay_totals(result), " ".join(combo) or "(as trained)"
                 for what, total in scored.items():
                     totals.setdefault(label, {}).setdefault(what, []).append(total)
-                print(
+                bar.write(
                     f"[replay] {source.name} {label}: distance error "
                     f"{_format_totals(scored) or '— (queue never filled)'}",
-                    flush=True,
+                    file=sys.stdout,
                 )
+        bar.close()
         if len(sources) > 1:
             for combo, scored in totals.items():
                 spread = {what: f"{mean_sd(v)} % (n={len(v)})" for what, v in scored.items()}
@@ -524,6 +551,7 @@ def main(argv: list[str] | None = None) -> None:
                     + "; ".join(f"{what} {text}" for what, text in spread.items()),
                     flush=True,
                 )
+        footer("parallax-replay", written)
     except (ReplayError, FileNotFoundError, ValueError) as exc:
         # bad input (a folder that is no run, an override it cannot take, a stale run config)
         for lock in locks:

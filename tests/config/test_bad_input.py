@@ -197,6 +197,7 @@ BAD_VALUES = [
     ("+train.presentaions=5", "train.presentaions=5"),
     ("distance.lm.learning_rate=1", "distance.lm.learning_rate=1"),
     ("perturbation=rotate_blur perturbation.start_fraction=null", "perturbation.start_fraction"),
+    ("perturbation.start_fraction=0.5", "perturbation.start_fraction=0.5"),
     ("env.pan_reset=maybe", "env.pan_reset=maybe"),
     ("seed=0,1", "seed=0,1"),
     ("foo=[", "foo=["),

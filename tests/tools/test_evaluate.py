@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import cv2
 import numpy as np
 import pytest
@@ -70,3 +72,24 @@ def test_a_bad_stimulus_setting_is_one_line_and_exit_2(tiny_run, tmp_path, capsy
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert named in line
     assert not (tmp_path / "out").exists()
+
+
+def test_between_none_skips_them_and_the_command_says_what_and_where(tiny_run, tmp_path, capsys):
+    out = tmp_path / "out"
+    common = ["--distances", "4.0", "6.0", "--greedy-only", "--start-jitter", "off"]
+    main([str(tiny_run), "--between", "none", "--out", str(out), *common])
+    result = json.loads((out / "eval.json").read_text())
+    assert "between" not in result["greedy_samples"]
+    assert "distance_between_grid" not in result
+    # stored absolute, so that the analyses find the run from any working directory
+    assert result["run_dir"] == str(tiny_run.resolve())
+    err = capsys.readouterr().err
+    assert f"[parallax-eval] frozen trials of {(tiny_run / 'checkpoint.pt').resolve()}" in err
+    assert "[parallax-eval]   perturbed: no" in err
+    assert "[parallax-eval]   trials: 2 (2 distances, greedy; 1 robot at a time)" in err
+    assert "[parallax-eval] wrote eval.json, eval_mae_per_position.png" in err
+    assert f"to {out.resolve()}" in err
+    with pytest.raises(SystemExit) as exit_info:
+        main([str(tiny_run), "--between", "none", "5.5", "--out", str(tmp_path / "no")])
+    assert exit_info.value.code == 2 and not (tmp_path / "no").exists()
+    assert "none stands alone" in capsys.readouterr().err

@@ -122,3 +122,25 @@ def test_a_miss_threshold_that_is_not_positive_is_one_line_and_exit_2(tmp_path, 
     assert exit_.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--miss" in err[0]
+
+
+def test_it_finds_the_run_from_another_working_directory(tmp_path, monkeypatch, capsys):
+    """eval.json from older evaluations stored the run relative to where parallax-eval ran;
+    evaluations written into a subfolder of the run (--out RUN/eval_before) find it above."""
+    run = _eval_dir(tmp_path, lambda p: p)
+    result = json.loads((run / "eval.json").read_text())
+    before = run / "eval_before"
+    before.mkdir()
+    (before / "eval.json").write_text(json.dumps({**result, "run_dir": "outputs/runs/gone"}))
+    (run / "eval.json").write_text(json.dumps({**result, "run_dir": "outputs/runs/gone"}))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    eye_bound.main([str(run), str(before)])
+    assert capsys.readouterr().out.count("| 29 |") == 2
+    (run / "config.yaml").unlink()
+    with pytest.raises(SystemExit) as exit_:
+        eye_bound.main([str(run)])
+    assert exit_.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "outputs/runs/gone" in line

@@ -8,6 +8,7 @@ import json
 import pytest
 
 from parallax.config import load_run_config
+from parallax.metrics import finite_or_none
 from parallax.tools.replay import ReplayError, main, parse_sweep, replay
 
 
@@ -34,10 +35,11 @@ def test_replay_as_trained_is_bit_identical(perturbed_run):
     trained = json.loads((perturbed_run / "summary.json").read_text())
     result = replay(perturbed_run)["summary"]
     assert trained["distance_error"], "the tiny run must have made online predictions"
-    # compared as JSON text: empty ranges are NaN, and NaN != NaN
-    assert json.dumps(result["distance_error"]) == json.dumps(trained["distance_error"])
-    assert json.dumps(result["before_perturbation"]["distance_error"]) == json.dumps(
-        trained["before_perturbation"]["distance_error"]
+    # empty ranges are NaN in memory and null in the strict JSON of summary.json
+    assert finite_or_none(result["distance_error"]) == trained["distance_error"]
+    assert (
+        finite_or_none(result["before_perturbation"]["distance_error"])
+        == trained["before_perturbation"]["distance_error"]
     )
     assert result["mae_per_position"] == trained["mae_per_position"]
 
@@ -73,7 +75,7 @@ def test_the_best_reward_readout_trains_and_replays_exactly(perturbed_run, tmp_p
     assert trained["mae_per_position"] == last["mae_per_position"]  # the same eye
     assert json.dumps(trained["distance_error"]) != json.dumps(last["distance_error"])
     replayed = replay(perturbed_run, ["train.distance_readout=best_reward"])["summary"]
-    assert json.dumps(replayed["distance_error"]) == json.dumps(trained["distance_error"])
+    assert finite_or_none(replayed["distance_error"]) == trained["distance_error"]
     records = [json.loads(line) for line in (best_run / "metrics.jsonl").read_text().splitlines()]
     assert all(len(r["best_pans"][0]) == len(r["pans"][0]) for r in records)
     with pytest.raises(
@@ -87,7 +89,7 @@ def test_until_perturbation_is_the_unperturbed_run(perturbed_run):
     cut = replay(perturbed_run, until_perturbation=True)
     before = trained["before_perturbation"]
     assert cut["summary"]["presentations"] == before["presentations"] == 4
-    assert json.dumps(cut["summary"]["distance_error"]) == json.dumps(before["distance_error"])
+    assert finite_or_none(cut["summary"]["distance_error"]) == before["distance_error"]
     assert cut["summary"]["mae_per_position"] == before["mae_per_position"]
     assert (
         cut["config"].train.presentations == 4 and cut["config"].perturbation.start_fraction is None
@@ -101,7 +103,17 @@ def test_cli_writes_run_like_folders(perturbed_run, tmp_path, capsys):
     assert written == ["distance.queue_size=3", "distance.queue_size=4"]
     cfg = load_run_config(next((tmp_path / "out").rglob("distance.queue_size=4")))
     assert cfg.distance.queue_size == 4
-    assert "distance error" in capsys.readouterr().out
+    printed = capsys.readouterr()
+    assert "distance error" in printed.out
+    # what it does and on what, and where each replay went (stderr, beside the results)
+    err = printed.err.splitlines()
+    assert (
+        err[0]
+        == "[parallax-replay] the distance learner re-run on the eye movements of 1 finished run"
+    )
+    assert "[parallax-replay]   overrides: distance.queue_size=3 | distance.queue_size=4" in err
+    out = (tmp_path / "out").resolve()
+    assert f"[parallax-replay] wrote {out / perturbed_run.name / 'distance.queue_size=4'}" in err
     # parallax-report reads the replays as runs and tables the factor that varies
     from parallax.tools.report.build import build_report
 

@@ -38,7 +38,8 @@ from parallax.config import load_run_config
 from parallax.distance.metrics import distance_error_by_range
 from parallax.distance.planner import MovementPlanner
 from parallax.tools.analysis.eye_bound import network_cross_validated, perfect_pans
-from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, RUN_CONFIG_NAME, read_record
+from parallax.tools.console import footer, header, progress
+from parallax.tools.report.runs import EVAL_NAME, METRICS_NAME, eval_run_dir, read_record
 from parallax.writable import file_problem
 
 #: Prices of travel (percentage points of expected distance error per cm) for the planned rows.
@@ -102,15 +103,20 @@ def planned_stop(planner: MovementPlanner, pans: np.ndarray, price_per_cm: float
     return np.asarray(stops), np.asarray(estimates)
 
 
-def analyse(eval_dir: Path, prices=PRICES) -> dict:
-    eval_dir = Path(eval_dir)
+def _inputs(eval_dir: Path):
+    """The evaluation in ``eval_dir``, its run's folder and configuration; ValueError or
+    FileNotFoundError for one that cannot be analysed."""
     result = json.loads(read_record(eval_dir / EVAL_NAME))
-    # the evaluation lies in its run's folder (parallax-eval's default) or one below it
-    # (--out RUN/NAME); its own run_dir is relative to where parallax-eval ran
-    run_dir = eval_dir if (eval_dir / RUN_CONFIG_NAME).is_file() else eval_dir.parent
+    run_dir = eval_run_dir(eval_dir, result.get("run_dir", ""))
     cfg = load_run_config(run_dir)
     if cfg.env.motion != "continuous":
         raise ValueError(f"{eval_dir}: its run did not sweep (env.motion={cfg.env.motion})")
+    return result, run_dir, cfg
+
+
+def analyse(eval_dir: Path, prices=PRICES) -> dict:
+    eval_dir = Path(eval_dir)
+    result, run_dir, cfg = _inputs(eval_dir)
     distances = np.asarray(result["greedy_samples"]["grid"]["distances"], float)
     pans = np.asarray(result["greedy_samples_by_readout"]["last"]["grid"]["pans"], float)
     lateral = np.asarray([float(l) for l in cfg.curriculum.lateral_positions])
@@ -118,26 +124,30 @@ def analyse(eval_dir: Path, prices=PRICES) -> dict:
     def error(estimates) -> dict:
         return distance_error_by_range(np.asarray(estimates), distances)
 
+    rules = [(f"fixed: to {100 * l:g} cm", fixed_stop, p) for p, l in enumerate(lateral)]
+    rules += [(f"planned: {price:g} per cm", planned_stop, price) for price in prices]
+    # the two cross-validated networks and each stopping rule: seconds to a minute apiece
+    bar = progress(total=2 + len(rules), desc=eval_dir.name, unit="fit")
+
     one_number = cfg.copy()  # the gain as a one-position vector, unweighted
     one_number.curriculum.lateral_positions = [float(lateral[-1])]
     one_number.distance.weighting = False
-    readouts = {
-        "pans at the offsets of L": error(network_cross_validated(cfg, pans, distances)),
-        "pursuit gain": error(
-            network_cross_validated(one_number, pursuit_gain(pans, lateral)[:, None], distances)
-        ),
-    }
+    readouts = {"pans at the offsets of L": error(network_cross_validated(cfg, pans, distances))}
+    bar.update()
+    gain = pursuit_gain(pans, lateral)[:, None]
+    readouts["pursuit gain"] = error(network_cross_validated(one_number, gain, distances))
+    bar.update()
     queue = training_sweeps(run_dir, int(cfg.distance.queue_size))
     planner = MovementPlanner(list(lateral), queue_size=len(queue[1]), price_per_trial=0.0)
     for s, d in zip(*queue):
         planner.observe(s, float(d))
-    rules = [(f"fixed: to {100 * l:g} cm", fixed_stop, p) for p, l in enumerate(lateral)]
-    rules += [(f"planned: {price:g} per cm", planned_stop, price) for price in prices]
     rows = []
     for label, rule, setting in rules:
         stops, estimates = rule(planner, pans, setting)
         travel = 2 * 100 * lateral[stops]  # out and back, as the planner prices it
         rows.append({"rule": label, "travel_cm": float(travel.mean()), **error(estimates)})
+        bar.update()
+    bar.close()
     return {
         "eval": str(eval_dir),
         "eye": eye_error_parts(result, lateral),
@@ -160,6 +170,19 @@ def main(argv: list[str] | None = None) -> None:
     if args.json and (why := file_problem(args.json)):
         print(f"continuous: error: --json {args.json} {why}", file=sys.stderr)
         sys.exit(2)
+    try:
+        for folder in args.evals:  # before the header: bad input is one line
+            _inputs(Path(folder))
+    except (FileNotFoundError, ValueError, KeyError) as exc:
+        print(f"continuous: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    header(
+        "continuous",
+        f"distance from the continuous sweeps of {len(args.evals)} evaluation"
+        + "s" * (len(args.evals) != 1),
+        prices=", ".join(f"{p:g}" for p in args.prices),
+        output=Path(args.json).resolve() if args.json else "the tables, printed",
+    )
     try:
         results = [analyse(Path(folder), args.prices) for folder in args.evals]
     except (FileNotFoundError, ValueError, KeyError) as exc:
@@ -190,6 +213,7 @@ def main(argv: list[str] | None = None) -> None:
         except OSError as exc:
             print(f"continuous: error: cannot write --json {args.json}: {exc}", file=sys.stderr)
             sys.exit(2)
+        footer("continuous", [args.json])
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from parallax.config import load_run_config
+from parallax.tools.console import footer, header, progress
 from parallax.tools.replay import ReplayError, find_sources, replay
 from parallax.tools.report.groups import mean_sd
 from parallax.tools.report.runs import record_file
@@ -111,9 +112,10 @@ def recovery(online: Sequence[tuple[int, float, float]], start: int) -> dict:
     }
 
 
-def study(sources: Sequence[Path], cache: Path | None = None) -> dict:
+def study(sources: Sequence[Path], cache: Path | None = None, bar=None) -> dict:
     """Every replay of the table and the spurt, for each source run. With ``cache``, each
-    source's replays are kept there (``<run>.json``) and reused while its eval is older."""
+    source's replays are kept there (``<run>.json``) and reused while its eval is older.
+    ``bar``: a progress bar moved on by each source's replays (:data:`REPLAYS`)."""
     rows: list[dict] = []
     growth: list[dict] = []
     for source in sources:
@@ -127,12 +129,18 @@ def study(sources: Sequence[Path], cache: Path | None = None) -> dict:
                 kept.write_text(json.dumps(one) + "\n")
         rows += one["rows"]
         growth += one["growth"]
+        if bar is not None:
+            bar.update(REPLAYS)
     return {"rows": rows, "growth": growth}
 
 
 def _eval_time(source: Path) -> float:
     path = record_file(source / FINAL_EVAL)  # or its compressed form
     return path.stat().st_mtime if path is not None else 0.0
+
+
+#: The replays of one source: the supervised learner, each walk fraction × slip, the spurt.
+REPLAYS = 1 + len(FRACTIONS) * len(SLIPS) + 1
 
 
 def study_one(source: Path) -> dict:
@@ -278,7 +286,17 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         sources = find_sources(args.sources)
-        results = study(sources, cache=Path(args.cache) if args.cache else None)
+        header(
+            "embodied",
+            f"{REPLAYS} replays of each of {len(sources)} supervised run"
+            + "s" * (len(sources) != 1)
+            + ": the walk fraction × stride slip table and the growth spurt",
+            cache=Path(args.cache).resolve() if args.cache else None,
+            output=Path(args.out).resolve(),
+        )
+        bar = progress(total=REPLAYS * len(sources), desc="replays", unit="replay")
+        results = study(sources, cache=Path(args.cache) if args.cache else None, bar=bar)
+        bar.close()
     except (ReplayError, FileNotFoundError, ValueError) as exc:
         print(f"embodied: error: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2
@@ -289,6 +307,7 @@ def main(argv: list[str] | None = None) -> int:
     report = report_text(results, argv if argv is not None else sys.argv[1:])
     (out / "README.md").write_text(report)
     print(report)
+    footer("embodied", ["embodied.json", "growth_recovery.png", "README.md"], out)
     return 0
 
 

@@ -40,7 +40,7 @@ from parallax.config import load_run_config
 from parallax.distance.metrics import distance_error_by_range
 from parallax.parts import distance_learner
 from parallax.tools.analysis.baselines import target_pans
-from parallax.tools.report.runs import EVAL_NAME, read_record, record_file
+from parallax.tools.report.runs import EVAL_NAME, eval_run_dir, read_record, record_file
 
 #: An eye that ends a presentation this far (degrees) from α* at some lateral position has failed
 #: to pursue there: four to six times the paper's Table 2 errors at 5–13 cm (0.16–0.25°).
@@ -117,7 +117,7 @@ def eye_bound(eval_dir: str | Path, miss_deg: float = FAILED_MISS_DEG) -> dict:
     readout = result["readout"]
     distances = np.asarray(result["greedy_samples"]["grid"]["distances"], float)
     pans = np.asarray(result["greedy_samples_by_readout"][readout]["grid"]["pans"], float)
-    cfg = load_run_config(result["run_dir"])
+    cfg = load_run_config(eval_run_dir(eval_dir, result["run_dir"]))
     if int(cfg.train.threads) > 0:  # as in training: small matrices, and a shared machine
         torch.set_num_threads(int(cfg.train.threads))
     step = action_grid_step(cfg.policy.actions)

@@ -27,6 +27,7 @@ from parallax import checkpoint
 from parallax.config import load_run_config
 from parallax.experiment import Experiment
 from parallax.tools.analysis.best_match import views_around_target
+from parallax.tools.console import footer, header, progress
 
 
 def sweep(
@@ -38,8 +39,10 @@ def sweep(
     span: float = 1.0,
     step: float = 0.05,
     texture_indices=None,
+    bar=None,
 ) -> dict:
-    """Rewards (stimuli × offsets), per-scale errors and E_π[a] around α*; see the module doc."""
+    """Rewards (stimuli × offsets), per-scale errors and E_π[a] around α*; see the module doc.
+    ``bar``: a progress bar moved on by each stimulus."""
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
     exp = Experiment(cfg)
@@ -78,6 +81,8 @@ def sweep(
                     row_a.append(float(exp.policy.probabilities(state)[0].cpu().numpy() @ actions))
                 rewards.append(row_r)
                 errors.append(row_e)
+                if bar is not None:
+                    bar.update()
                 mean_steps.append(row_a)
         scales = list(exp.coder.dictionaries)
     finally:
@@ -135,6 +140,17 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
     torch.set_num_threads(1)
+    stimuli = len(args.distances) * len(args.texture_indices or range(args.textures))
+    header(
+        "landscape",
+        f"the reward and E_π[a] within ±{args.span:g}° of α* for {len(args.run_dirs)} run"
+        + "s" * (len(args.run_dirs) != 1),
+        checkpoint=args.checkpoint,
+        stimuli=f"{stimuli} per run ({len(args.distances)} distances)",
+        output=", ".join(str(Path(p).resolve()) for p in (args.json, args.plot) if p)
+        or "the tables, printed",
+    )
+    bar = progress(total=stimuli * len(args.run_dirs), desc="stimuli", unit="stimulus")
     results = []
     for run_dir in args.run_dirs:
         result = sweep(
@@ -145,14 +161,17 @@ def main(argv: list[str] | None = None) -> int:
             args.textures,
             args.span,
             texture_indices=args.texture_indices,
+            bar=bar,
         )
         results.append(result)
         if len(args.run_dirs) > 1:
             print(f"== {run_dir}")
         _print_table(result)
+    bar.close()
     if args.json:
         payload = results[0] if len(results) == 1 else results
         Path(args.json).write_text(json.dumps(payload, indent=1))
+        footer("landscape", [args.json])
     if args.plot:
         from parallax.tools.plots import pursuit_landscape
 

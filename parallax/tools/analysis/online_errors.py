@@ -27,14 +27,15 @@ from parallax.config import READOUT_PANS, distance_readout, load_run_config
 from parallax.distance_step import learn_online
 from parallax.metrics import DistanceErrorTracker
 from parallax.parts import distance_learner
+from parallax.tools.console import footer, header, progress
 from parallax.tools.replay import ReplayError, parse_sweep, read_stream
 from parallax.tools.report.runs import METRICS_NAME, record_file
 
 
-def trace(run_dir: str | Path, overrides: Sequence[str] = ()) -> list[dict]:
+def trace(run_dir: str | Path, overrides: Sequence[str] = (), bar=None) -> list[dict]:
     """One row per online prediction: presentation, true and predicted distance (robot 0 of
     each presentation), its relative error (%), the windowed total error after it, and the RMSE
-    (m) and μ of the fit that made it."""
+    (m) and μ of the fit that made it. ``bar``: a progress bar moved on by each presentation."""
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
     cfg.merge_with_dotlist(list(overrides))
@@ -43,6 +44,8 @@ def trace(run_dir: str | Path, overrides: Sequence[str] = ()) -> list[dict]:
     key = READOUT_PANS[distance_readout(cfg)]
     rows, fit = [], {}
     for record in read_stream(run_dir):
+        if bar is not None:
+            bar.update()
         if not record["learnt_distance"]:
             continue
         pans = np.atleast_2d(np.asarray(record[key], dtype=np.float64))
@@ -83,10 +86,24 @@ def main(argv: list[str] | None = None) -> None:
     except ReplayError as exc:
         print(f"online_errors: error: {exc}", file=sys.stderr)
         sys.exit(2)
+    try:  # before the header: a bad override is one line
+        for combo in combos:
+            load_run_config(Path(args.run)).merge_with_dotlist(list(combo))
+        presentations = len(read_stream(Path(args.run)))
+    except (ReplayError, ValueError, KeyError) as exc:
+        print(f"online_errors: error: {str(exc).splitlines()[0]}", file=sys.stderr)
+        sys.exit(2)
+    header(
+        "online_errors",
+        f"the distance learner replayed on {args.run}, presentation by presentation",
+        settings=" | ".join(" ".join(c) or "(the run's settings)" for c in combos),
+        output=Path(args.out).resolve() if args.out else "the worst predictions, printed",
+    )
+    bar = progress(total=presentations * len(combos), desc="presentations")
     for combo in combos:
         label = " ".join(combo) or "(the run's settings)"
         try:
-            rows = trace(args.run, combo)
+            rows = trace(args.run, combo, bar)
         except (ReplayError, ValueError, KeyError) as exc:
             print(f"online_errors: error: {label}: {str(exc).splitlines()[0]}", file=sys.stderr)
             sys.exit(2)
@@ -107,8 +124,10 @@ def main(argv: list[str] | None = None) -> None:
                 f"{r['predicted_m']:.2f} m ({r['error_pct']:.1f} %); fit before: RMSE {rmse}, "
                 f"μ {mu}; s = {r['s_deg']}"
             )
+    bar.close()
     if args.out:
         Path(args.out).write_text(json.dumps(results, indent=1))
+        footer("online_errors", [args.out])
 
 
 if __name__ == "__main__":

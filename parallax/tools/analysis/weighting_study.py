@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import statistics
 import sys
 from collections.abc import Iterable, Sequence
@@ -38,9 +39,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from parallax.distance.learner import DistanceLearner
+from parallax.tools import console
 from parallax.tools.analysis.synthetic_pans import (
     PAPER_DISTANCES_M,
     PAPER_LATERAL_POSITIONS_M,
@@ -151,6 +152,22 @@ def run_study(
     progress: bool = False,
 ) -> list[dict[str, object]]:
     """One row per (pattern, weighting, seed): its error in %. Same inputs, same rows."""
+    check(patterns, ys, jobs)
+    work = [
+        (name, y, int(seed), settings) for name in patterns for y in [None, *ys] for seed in seeds
+    ]
+    bar = {"total": len(work), "disable": not progress, "desc": "learners", "unit": "fit"}
+    if jobs == 1:
+        return list(console.progress(map(_one, work), **bar))
+    # One torch thread per worker: the jobs already fill the cores, and the fits are small.
+    with ProcessPoolExecutor(
+        max_workers=jobs, initializer=torch.set_num_threads, initargs=(1,)
+    ) as pool:
+        return list(console.progress(pool.map(_one, work), **bar))
+
+
+def check(patterns: Sequence[str], ys: Sequence[float], jobs: int) -> None:
+    """ValueError naming the first setting of a study that cannot run."""
     unknown = [name for name in patterns if name not in NOISE_PATTERNS]
     if unknown:
         raise ValueError(
@@ -163,18 +180,6 @@ def run_study(
         )
     if jobs < 1:
         raise ValueError(f"jobs must be at least 1, got {jobs!r}")
-    work = [
-        (name, y, int(seed), settings) for name in patterns for y in [None, *ys] for seed in seeds
-    ]
-    if jobs == 1:
-        return list(tqdm(map(_one, work), total=len(work), disable=not progress, desc="learners"))
-    # One torch thread per worker: the jobs already fill the cores, and the fits are small.
-    with ProcessPoolExecutor(
-        max_workers=jobs, initializer=torch.set_num_threads, initargs=(1,)
-    ) as pool:
-        return list(
-            tqdm(pool.map(_one, work), total=len(work), disable=not progress, desc="learners")
-        )
 
 
 def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
@@ -266,6 +271,17 @@ def main(argv: list[str] | None = None) -> int:
         settings = StudySettings(
             stream=args.stream, queue=args.queue, weight_decay=args.weight_decay
         )
+        check(args.patterns, args.y, args.jobs)  # before the header: bad input is one line
+        learners = len(args.patterns) * (1 + len(args.y)) * args.seeds
+        console.header(
+            "weighting_study",
+            f"{learners} distance learners on geometric pans with known noise",
+            patterns=", ".join(args.patterns),
+            y=", ".join(f"{y:g}" for y in args.y) + " (and no weighting)",
+            seeds=args.seeds,
+            jobs=args.jobs,
+            output=os.path.abspath(args.json) if args.json else "the table, printed",
+        )
         rows = run_study(
             args.patterns, args.y, range(args.seeds), settings, jobs=args.jobs, progress=True
         )
@@ -285,6 +301,7 @@ def main(argv: list[str] | None = None) -> int:
         }
         with open(args.json, "w", encoding="utf-8") as handle:
             json.dump(payload, handle, indent=1)
+        console.footer("weighting_study", [args.json])
     return 0
 
 

@@ -16,6 +16,7 @@ from typing import Any
 from hydra.errors import HydraException
 from omegaconf.errors import OmegaConfBaseException
 
+from parallax.tools.console import header, progress
 from parallax.tools.report.figures import (
     Figures,
     figure_ablation,
@@ -93,7 +94,12 @@ def build_report(
     if tables not in TABLE_CHOICES:
         raise ReportError(f"--tables must be one of {', '.join(TABLE_CHOICES)}, got {tables!r}")
     run_dirs = list(dict.fromkeys(p.resolve() for path in paths for p in find_run_dirs(path)))
-    runs = [load_run(p) for p in run_dirs]
+    header(
+        "parallax-report",
+        f"{tables} tables from {len(run_dirs)} job directories below {', '.join(map(str, paths))}",
+        output=(out.resolve() / name) if out is not None else "the Markdown only, printed",
+    )
+    runs = [load_run(p) for p in progress(run_dirs, desc="reading runs", unit="run", leave=False)]
     failed = [r for r in runs if r.problem is not None]
     groups, duplicates = group_runs(runs)
     try:

@@ -24,8 +24,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
+from parallax.tools.console import footer
 from parallax.tools.report.build import TABLE_CHOICES, build_report
 from parallax.tools.report.runs import ReportError
 from parallax.writable import folder_problem
@@ -79,6 +81,7 @@ def main(argv: list[str] | None = None) -> None:
             if not notes_path.is_file():
                 raise ReportError(f"--notes {args.notes}: no such file")
             notes = notes_path.read_text()
+        started = time.time()
         markdown, _ = build_report(
             args.paths,
             Path(args.out) if args.out else None,
@@ -92,6 +95,10 @@ def main(argv: list[str] | None = None) -> None:
         print(f"parallax-report: error: {exc}", file=sys.stderr)
         sys.exit(2)
     print(markdown)
+    if args.out:
+        out = Path(args.out)
+        written = sorted(p for p in out.rglob("*") if p.is_file() and p.stat().st_mtime >= started)
+        footer("parallax-report", [p.relative_to(out) for p in written], out)
 
 
 if __name__ == "__main__":

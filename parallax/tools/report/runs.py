@@ -306,3 +306,18 @@ def read_metrics(path: Path) -> list[dict]:
         except json.JSONDecodeError:
             continue
     return records
+
+
+def eval_run_dir(eval_dir: str | Path, stored: str) -> Path:
+    """The run an evaluation in ``eval_dir`` measured, from the ``run_dir`` its eval.json
+    stored: as stored (absolute, or relative to the working directory, as older evaluations
+    kept it), else the evaluation's own folder or the one above it (an eval kept beside or
+    inside its run, wherever the two were moved)."""
+    eval_dir, path = Path(eval_dir), Path(stored)
+    for candidate in ([path] if stored else []) + [eval_dir, eval_dir.parent]:
+        if (candidate / "config.yaml").is_file():
+            return candidate
+    raise FileNotFoundError(
+        f"{eval_dir}/eval.json measured the run {stored}, which holds no config.yaml here "
+        "(nor does the evaluation's folder or the one above it)"
+    )
