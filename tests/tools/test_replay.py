@@ -361,7 +361,8 @@ def test_a_record_kept_for_replay_replays_bit_identically(perturbed_run, tmp_pat
     # the fit statistics stay, so the network's calls read the same (the errors to 7 digits)
     for block, whole_block in zip(network_calls(kept), network_calls(perturbed_run), strict=True):
         error = pytest.approx(whole_block["distance_error"], rel=5e-7)
-        assert block == {**whole_block, "distance_error": error}
+        eye = pytest.approx(whole_block["eye_mae"], rel=5e-7)
+        assert block == {**whole_block, "distance_error": error, "eye_mae": eye}
     # thinned to what the reports read, the record has no s left to replay
     compact([kept], keep="reports")
     with pytest.raises(ReplayError, match="no eye-movement vectors"):
