@@ -40,7 +40,10 @@ class Worker:
         )
         # The worker runs as a file through -c, so that its own directory does not lead
         # sys.path and the code under PYTHONPATH is the one imported.
-        boot = "import runpy, sys; runpy.run_path(sys.argv[1], run_name='__main__')"
+        boot = (
+            "import runpy, sys; sys.argv[:] = sys.argv[1:]; "
+            "runpy.run_path(sys.argv[0], run_name='__main__')"
+        )
         self.process = subprocess.Popen(
             [sys.executable, "-c", boot, str(WORKER), str(threads), *overrides],
             stdin=subprocess.PIPE,
