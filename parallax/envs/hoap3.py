@@ -383,7 +383,8 @@ class Physics(dm_mujoco.Physics):
         periphery = self.renderer.render(
             self.data.ptr, self._left_eye_camera, size // factor, size // factor, option
         )
-        image = np.repeat(np.repeat(periphery, factor, axis=0), factor, axis=1)
+        # nearest-neighbour at a whole factor: every pixel becomes a factor×factor block
+        image = cv2.resize(periphery, (size, size), interpolation=cv2.INTER_NEAREST)
         fovy = self.model.cam_fovy[self._left_eye].copy()
         self.model.cam_fovy[self._left_eye] = eye_fovy_deg(fovea)
         try:
