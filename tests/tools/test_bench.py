@@ -94,7 +94,9 @@ def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
     assert "[ceiling cpu]" in printed and "cores busy" in printed
 
 
-@pytest.mark.parametrize("name", ["cpu_2core.json", "cpu_2core_turns.json", "gpu_h100.json"])
+@pytest.mark.parametrize(
+    "name", ["cpu_2core.json", "cpu_2core_turns.json", "cpu_2core_fovea.json", "gpu_h100.json"]
+)
 def test_show_prints_a_committed_report_without_measuring(name, capsys):
     """docs/performance.md quotes these files; --show prints their tables."""
     path = Path(__file__).resolve().parents[2] / "docs" / "results" / "bench" / name
