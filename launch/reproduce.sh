@@ -25,7 +25,7 @@
 # before the report, which reads them so). A run with a summary.json is finished and is not trained
 # again, checkpoint or not; an unfinished one continues from its checkpoint; a model is evaluated
 # again only when its checkpoint is newer than its eval. Extra settings: launch/ablation_lib.sh (LAUNCHER, N_JOBS, RECORD_ROOT,
-# REPORT_ROOT, PARALLAX_DRY_RUN), plus
+# REPORT_ROOT, PARALLAX_DRY_RUN: also the estimated wall time), plus
 #   EVAL_ARGS   parallax-eval options of every model (default: the greedy eye on held-out
 #               photographs, one per distance of the grid 3.0, 3.1, …, 10.0 m, and 35 distances
 #               between its points)
@@ -41,6 +41,16 @@ for arg in "$@"; do
 done
 if (( ${#families[@]} == 0 )); then
   families=(recipe paper unsourced without)
+fi
+# a dry run also prints each family's wall time on this machine, estimated from the committed
+# parallax-bench report (its single-robot runs side by side; parallax.tools.bench.estimate)
+bench_report=docs/results/bench/cpu_2core_processes.json
+if [[ -n "${PARALLAX_DRY_RUN:-}" && -f "$bench_report" ]]; then
+  for family in "${families[@]}"; do
+    python -m parallax.tools.bench.estimate "$bench_report" "$family" \
+      --seeds "$(tr ',' '\n' <<< "${SEEDS:-0,1,2}" | wc -l)" \
+      --headline-seeds "$(tr ',' '\n' <<< "${HEADLINE_SEEDS:-0,1,2,3,4}" | wc -l)" || true
+  done
 fi
 read -ra eval_args <<< "${EVAL_ARGS:---robots 16 --greedy-only --between $(LC_ALL=C seq -s ' ' -f '%.2f' 3.05 0.2 9.85)}"
 # the recipe less an improvement: the grid alone

@@ -25,6 +25,7 @@ the numpy/torch code), ``cpp`` (the kernels or an error) or ``torch`` (always nu
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import logging
 import os
 import threading
@@ -74,7 +75,13 @@ def _build() -> ModuleType:
         # 32 vector registers and mask registers for the pursuit's 32-byte vectors (torch runs
         # its AVX512 kernels only where AVX512F, VL, BW and DQ are all present).
         flags += ["-mavx512f", "-mavx512vl", "-mavx512bw", "-mavx512dq"]
-    name = f"parallax_pursuit_{capability.lower()}"
+    # The name carries a digest of the source and the flags, and the build compiles a copy of
+    # the source kept in its own directory: checkouts at other paths or revisions then share a
+    # build only when it is the same, and never rebuild each other's (a build's command names
+    # its source file, so one source at two paths would rebuild on every switch, ~1 min each).
+    source = SOURCE.read_bytes()
+    digest = hashlib.sha256(source + " ".join(flags).encode()).hexdigest()[:12]
+    name = f"parallax_pursuit_{capability.lower()}_{digest}"
     build_directory = _build_directory(cpp_extension, name)
     if not (build_directory / f"{name}.so").exists():
         log.info("compiling the matching-pursuit kernels into %s (once)", build_directory)
@@ -82,9 +89,12 @@ def _build() -> ModuleType:
         # torch's own lock file outlives a build that was killed, and then every later build
         # waits for it forever; while we hold our lock no other build of ours can be running.
         (build_directory / "lock").unlink(missing_ok=True)
+        copy = build_directory / SOURCE.name
+        if not copy.exists() or copy.read_bytes() != source:
+            copy.write_bytes(source)
         return cpp_extension.load(
             name=name,
-            sources=[str(SOURCE)],
+            sources=[str(copy)],
             extra_cflags=flags,
             build_directory=str(build_directory),
             verbose=False,

@@ -142,6 +142,7 @@ ADDED_SETTINGS = {
     ("env", "sweep"): dataclasses.asdict(SweepConfig()),  # unread by pick-and-place
     ("distance", "warm_start"): True,
     ("distance", "keep_first_scaling"): False,
+    ("env", "fovea_px"): None,  # every pixel rendered at full resolution
 }
 
 

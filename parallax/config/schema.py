@@ -30,6 +30,8 @@ SCHEMA_NODE = "schema"
 #: (policy.robot_updates): each, every robot's update applied as a step of its own | mean, one
 #: step, the mean of the robots' updates. Either is the paper's single robot at env.robots=1.
 ROBOT_UPDATES = ("each", "mean")
+#: With env.fovea_px, the image outside the fovea is rendered at 1/this of the resolution.
+PERIPHERY_SUBSAMPLE = 4
 
 
 # --- the world (env/) ------------------------------------------------------------------------
@@ -109,6 +111,12 @@ class EnvConfig:
 
     #: Side of the square left-eye image in pixels; the focal length stays 531 px (Table 1).
     image_size: int = 256
+    #: null: every pixel of the eye image is rendered at full resolution. A size (the fine
+    #: scale's window, 150): only what the retina reads at full resolution, the central square of
+    #: this many pixels, and the rest of the image rendered at 1/4 of the resolution and
+    #: enlarged, which the coarse scale's ×8 pyramid reads (fewer pixels to rasterise; it changes
+    #: the images, so it is off by default; docs/performance.md).
+    fovea_px: int | None = None
     #: t_h, iterations (eye movements) per lateral position (§4.1).
     trial_length: int = 30
     #: The paper's distances 3.0, 3.1, …, 10.0 m (§4.1).

@@ -21,7 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from parallax.config.errors import ConfigError
 from parallax.config.plumbing import DISTANCE_READOUTS, closest_key, schema_keys
-from parallax.config.schema import ROBOT_UPDATES
+from parallax.config.schema import PERIPHERY_SUBSAMPLE, ROBOT_UPDATES
 
 #: Settings the trainer fills at run time; ``???`` in a composed config.
 RUN_TIME_KEYS = frozenset(
@@ -185,6 +185,15 @@ def _env(check: _Checks) -> None:
     size = check.integer("env.image_size", low, " (pixels)")
     if size > high:
         check.fail("env.image_size", size, f"must be at most {high} pixels")
+    if check.get("env.fovea_px") is not None:
+        fovea = check.integer("env.fovea_px", 2, " (pixels) or null")
+        if fovea > size or (size - fovea) % 2 or size % PERIPHERY_SUBSAMPLE:
+            check.fail(
+                "env.fovea_px",
+                fovea,
+                f"must be at most env.image_size={size}, with an even margin, in an image whose "
+                f"side is a multiple of {PERIPHERY_SUBSAMPLE}",
+            )
     check.integer("env.trial_length", 2, " (iterations per lateral position)")
     start = check.number("env.distances.start", above=0, what=" (metres)")
     stop = check.number("env.distances.stop", above=0, what=" (metres)")

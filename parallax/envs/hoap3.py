@@ -31,7 +31,7 @@ import mujoco
 import numpy as np
 from dm_control import mujoco as dm_mujoco
 
-from parallax.config.schema import DistanceGridConfig, EnvConfig
+from parallax.config.schema import PERIPHERY_SUBSAMPLE, DistanceGridConfig, EnvConfig
 from parallax.envs import rendering
 from parallax.envs.stimuli import StimulusSet, background_image
 from parallax.geometry import FOCAL_LENGTH_PX
@@ -135,19 +135,22 @@ class Physics(dm_mujoco.Physics):
         stimuli: StimulusSet,
         image_size: int = EnvConfig.image_size,
         max_distance_m: float = DistanceGridConfig.stop,
+        fovea_px: int | None = EnvConfig.fovea_px,
     ) -> Physics:
         """Compile the world for ``image_size`` eye images (env.image_size, whose range
-        parallax.config checks) and attach the (shared) stimulus set."""
+        parallax.config checks) and attach the (shared) stimulus set; ``fovea_px``
+        (env.fovea_px): render only the central square of that side at full resolution."""
         physics = cls.from_xml_string(
             model_xml(int(image_size), stimuli.resolution, max_distance_m)
         )
-        physics._setup(stimuli, int(image_size))
+        physics._setup(stimuli, int(image_size), fovea_px)
         return physics
 
-    def _setup(self, stimuli: StimulusSet, image_size: int) -> None:
+    def _setup(self, stimuli: StimulusSet, image_size: int, fovea_px: int | None = None) -> None:
         model = self.model.ptr
         self._stimuli = stimuli
         self._image_size = image_size
+        self._fovea_px = None if fovea_px is None else int(fovea_px)
         self._renderer: rendering.SceneRenderer | None = None
         self._eye_option = rendering.eye_scene_option()
         self._pan_joint = self.model.name2id("head_pan", "joint")
@@ -354,9 +357,12 @@ class Physics(dm_mujoco.Physics):
     def render_left_eye(self, show_marker: bool = False) -> np.ndarray:
         """The left-eye image I(t): (S, S, 3) uint8, perturbation blur applied."""
         option = rendering.eye_scene_option((MARKER_GROUP,)) if show_marker else self._eye_option
-        image = self.renderer.render(
-            self.data.ptr, self._left_eye_camera, self._image_size, self._image_size, option
-        )
+        if self._fovea_px is None:
+            image = self.renderer.render(
+                self.data.ptr, self._left_eye_camera, self._image_size, self._image_size, option
+            )
+        else:
+            image = self._render_fovea_and_periphery(option)
         if self._blur_sigma > 0:
             image = cv2.GaussianBlur(
                 image,
@@ -365,6 +371,30 @@ class Physics(dm_mujoco.Physics):
                 sigmaY=self._blur_sigma,
                 borderType=cv2.BORDER_REFLECT_101,
             )
+        return image
+
+    def _render_fovea_and_periphery(self, option: mujoco.MjvOption) -> np.ndarray:
+        """The eye image with only its central ``fovea_px`` square at full resolution (a camera
+        whose field of view is that square's: the full render's centre, to one grey level), the
+        rest rendered at 1/PERIPHERY_SUBSAMPLE of the resolution and enlarged by repeating its
+        pixels: what the retina reads (the fine scale's window at full resolution, the coarse
+        scale's after a ×8 pyramid)."""
+        size, fovea, factor = self._image_size, self._fovea_px, PERIPHERY_SUBSAMPLE
+        periphery = self.renderer.render(
+            self.data.ptr, self._left_eye_camera, size // factor, size // factor, option
+        )
+        # nearest-neighbour at a whole factor: every pixel becomes a factor×factor block
+        image = cv2.resize(periphery, (size, size), interpolation=cv2.INTER_NEAREST)
+        fovy = self.model.cam_fovy[self._left_eye].copy()
+        self.model.cam_fovy[self._left_eye] = eye_fovy_deg(fovea)
+        try:
+            centre = self.renderer.render(
+                self.data.ptr, self._left_eye_camera, fovea, fovea, option
+            )
+        finally:
+            self.model.cam_fovy[self._left_eye] = fovy
+        margin = (size - fovea) // 2
+        image[margin : margin + fovea, margin : margin + fovea] = centre
         return image
 
     def render_view(

@@ -365,6 +365,7 @@ def load(
     distances: Sequence[float] | Mapping[str, float] | None = default(EnvConfig, "distances"),
     stimuli: Mapping[str, Any] | None = default(EnvConfig, "stimuli"),
     image_size: int = EnvConfig.image_size,
+    fovea_px: int | None = EnvConfig.fovea_px,
     pan_reset: bool = EnvConfig.pan_reset,
     camera_rotation_deg: float = PerturbationConfig.camera_rotation_deg,
     rotation_axis: str | Sequence[float] = PerturbationConfig.rotation_axis,
@@ -398,7 +399,9 @@ def load(
         motion=motion,
         sweep=sweep,
     )
-    physics = Physics.create(texture_set, image_size=image_size, max_distance_m=max(grid))
+    physics = Physics.create(
+        texture_set, image_size=image_size, max_distance_m=max(grid), fovea_px=fovea_px
+    )
     physics.set_perturbation(
         camera_rotation_deg=camera_rotation_deg, blur_sigma=blur_sigma, rotation_axis=rotation_axis
     )

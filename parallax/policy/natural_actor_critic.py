@@ -34,7 +34,7 @@ from torch import Tensor, nn
 
 from parallax.config.schema import ROBOT_UPDATES, PolicyConfig
 from parallax.geometry import ACTION_SET_DEG
-from parallax.policy.features import FeatureNormalizer, PolicyInputs
+from parallax.policy.features import FeatureNormalizer, PolicyInputs, all_finite
 from parallax.policy.in_turn import apply_in_turn
 
 __all__ = ["PAPER_ACTIONS_DEG", "ROBOT_UPDATES", "NaturalActorCritic"]
@@ -205,28 +205,34 @@ class NaturalActorCritic(nn.Module):
         batch = features.shape[0]
         next_features = self.features(next_phi, "next_phi")
         action = self._rows("action", action, batch, torch.int64)
-        if batch and (int(action.min()) < 0 or int(action.max()) >= self.num_actions):
-            got = f"{action.min().item()}..{action.max().item()}"
-            raise ValueError(f"action indices must lie in [0, {self.num_actions}), got {got}")
+        if batch:
+            low, high = (int(bound) for bound in torch.aminmax(action))
+            if low < 0 or high >= self.num_actions:
+                got = f"{low}..{high}"
+                raise ValueError(f"action indices must lie in [0, {self.num_actions}), got {got}")
         reward = self._rows("reward", reward, batch).to(self.actor.dtype)
-        if not bool(torch.isfinite(reward).all()):
+        if not all_finite(reward):
             raise ValueError("reward holds non-finite values")
         valid = self._rows("valid", valid, batch, torch.bool)
+        valid_count = int(valid.sum())
         probabilities = self._policy(features)
         entropy = -(probabilities * torch.log(probabilities.clamp(min=1e-30))).sum(dim=1)
-        rows = (features[valid], action[valid], reward[valid], next_features[valid])
+        if valid_count == batch:  # every row (the loop's case): the same rows, without copies
+            rows, valid_probabilities = (features, action, reward, next_features), probabilities
+        else:
+            rows = (features[valid], action[valid], reward[valid], next_features[valid])
+            valid_probabilities = probabilities[valid]
         if self.robot_updates == "mean" or rows[0].shape[0] <= 1:
-            td_error = self._step(*rows, probabilities[valid])
+            td_error = self._step(*rows, valid_probabilities)
         else:
             # where no step is projected, the same steps through the Gram matrices; None where
             # one is not finite, which the row-by-row steps then reject on their own
             fast = apply_in_turn(self, *rows) if self.actor_projection_radius is None else None
             td_error = self._step_each(*rows) if fast is None else fast
-        valid_count = int(valid.sum())
         zero, values = torch.zeros((), device=features.device), features @ self.critic
         summary = [td_error.mean() if valid_count else zero, self.average_reward]
         summary += [entropy.mean(), values.mean(), values.abs().mean()] if batch else [zero] * 3
-        summary += [self.critic.norm(), self.advantage.norm(), self.actor.norm()]
+        summary += [torch.linalg.vector_norm(p) for p in (self.critic, self.advantage, self.actor)]
         stats = dict(zip(_STATISTICS, torch.stack(summary).tolist()))
         stats["valid_fraction"] = valid_count / batch if batch else 0.0
         stats["rejected_updates"] = float(self.rejected_updates)

@@ -64,6 +64,8 @@ def test_parallax_train_stops_with_one_line(tmp_path, override, named):
 
 #: Checked in-process (the same function `parallax-train` calls before Hydra starts).
 BAD_VALUES = [
+    ("env.fovea_px=151", "env.fovea_px=151"),
+    ("env.fovea_px=300", "env.fovea_px=300"),
     # numbers that cannot work: NaN, inf, negative, zero
     ("seed=-1", "seed=-1"),
     ("seed=1.5", "seed=1.5"),

@@ -134,7 +134,11 @@ PART_DEFAULTS = [
     ),
     (
         Physics.create,
-        {"image_size": EnvConfig.image_size, "max_distance_m": DistanceGridConfig.stop},
+        {
+            "image_size": EnvConfig.image_size,
+            "max_distance_m": DistanceGridConfig.stop,
+            "fovea_px": EnvConfig.fovea_px,
+        },
     ),
 ]
 

@@ -467,3 +467,23 @@ def test_the_pixels_match_i0_best_at_the_target_pan():
         distance=10.0, lateral=0.2, textures=2, span_deg=0.5, step_deg=0.05
     )
     assert all(abs(v) <= 0.1 for values in offsets.values() for v in values), offsets
+
+
+def test_a_fovea_render_is_the_full_render_at_its_centre_and_coarser_around_it():
+    """env.fovea_px: the central square is the full render's pixels (to one level: the narrower
+    camera samples the texture with other rounding), the rest the periphery's 4×4 blocks, and
+    the image keeps its size."""
+    full = parallax.envs.load(seed=3)
+    foveal = parallax.envs.load(seed=3, fovea_px=150)
+    try:
+        for step in (lambda env: env.reset(), lambda env: env.step(0.1)):
+            whole, parts = (step(env).observation["image"] for env in (full, foveal))
+            assert parts.shape == whole.shape == (256, 256, 3)
+            centre = parts[53:203, 53:203].astype(int) - whole[53:203, 53:203]
+            assert np.abs(centre).max() <= 1 and np.mean(centre != 0) < 0.01
+            corner = parts[:52, :52].reshape(13, 4, 13, 4, 3)
+            assert (corner == corner[:, :1, :, :1]).all()
+            assert not np.array_equal(parts[:52, :52], whole[:52, :52])
+    finally:
+        full.close()
+        foveal.close()

@@ -581,3 +581,26 @@ def test_the_critics_scale_is_reported() -> None:
     assert after != pytest.approx(before, rel=1e-3)
     assert stats["critic_scale"] == pytest.approx(after, rel=1e-6)
     assert stats["critic_norm"] == pytest.approx(float(policy.critic.norm()), rel=1e-6)
+
+
+@pytest.mark.parametrize("feature_norm", ["none", "difference", "zscore"])
+@pytest.mark.parametrize("robot_updates", ["each", "mean"])
+def test_rows_all_valid_update_exactly_as_the_same_rows_beside_a_gated_one(
+    feature_norm, robot_updates
+) -> None:
+    """Every row valid (the loop's case, which skips the masks) gives the bits of the same rows
+    picked out of a batch with a gated row, statistics included."""
+    plain, masked = (_policy(feature_norm=feature_norm, robot_updates=robot_updates) for _ in "ab")
+    for policy in (plain, masked):
+        policy.act(_states(5, seed=20))
+        _randomise(policy, seed=21)
+    phi, next_phi = _states(4, seed=22), _states(4, seed=23)
+    action, reward = torch.tensor([1, 5, 0, 2]), torch.tensor([-0.3, -0.6, -0.2, -8.0])
+    stats = plain.update(phi[:3], action[:3], reward[:3], next_phi[:3], torch.ones(3, dtype=bool))
+    gated = torch.tensor([True, True, True, False])
+    masked_stats = masked.update(phi, action, reward, next_phi, gated)
+    for name, value in plain.state_dict().items():
+        if torch.is_tensor(value):
+            assert torch.equal(masked.state_dict()[name], value), name
+    for key in ("td_error", "average_reward", "critic_norm", "advantage_norm", "actor_norm"):
+        assert stats[key] == masked_stats[key], key

@@ -94,7 +94,9 @@ def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
     assert "[ceiling cpu]" in printed and "cores busy" in printed
 
 
-@pytest.mark.parametrize("name", ["cpu_2core.json", "cpu_2core_turns.json", "gpu_h100.json"])
+@pytest.mark.parametrize(
+    "name", ["cpu_2core.json", "cpu_2core_turns.json", "cpu_2core_fovea.json", "gpu_h100.json"]
+)
 def test_show_prints_a_committed_report_without_measuring(name, capsys):
     """docs/performance.md quotes these files; --show prints their tables."""
     path = Path(__file__).resolve().parents[2] / "docs" / "results" / "bench" / name
@@ -161,3 +163,48 @@ def test_a_bad_also_override_exits_2_naming_it_and_writes_nothing(tmp_path, caps
     error = capsys.readouterr().err
     assert "env.robots_per_turn" in error and "-1" in error
     assert not out.exists()
+
+
+def test_the_estimate_counts_the_runs_reproduce_trains_and_divides_by_the_rate(tmp_path, capsys):
+    from parallax.tools.bench import estimate
+
+    report = tmp_path / "bench.json"
+    two = {"processes": 2, "steps_per_second": 400.0}
+    report.write_text(json.dumps({"processes": {"this code": {"two": two}}}))
+    estimate.main([str(report), "paper"])
+    lines = capsys.readouterr().out.splitlines()
+    # the paper family: 8 files trained (the unweighted 5–20 cm one is replayed), the 5–20 cm
+    # weighted file with 5 seeds and the others with 3
+    runs = estimate.trained("paper")
+    assert len(runs) == 8 and "paper_multi_5_20" not in runs
+    total = sum(estimate.robot_iterations(n) * (5 if "5_20" in n else 3) for n in runs)
+    assert (
+        lines[0]
+        == f"paper: 26 runs of 8 experiment files, {total / 1e6:.2f} million robot-iterations"
+    )
+    assert lines[1].endswith(f"→ {total / 400 / 3600:.1f} hours")
+    with pytest.raises(SystemExit) as exit_info:
+        estimate.main([str(report), "nosuchfamily"])
+    assert exit_info.value.code == 2 and "nosuchfamily" in capsys.readouterr().err
+
+
+def test_compare_needs_processes_and_a_commit(capsys):
+    for arguments in (["--compare", "HEAD"], ["--processes", "1", "--compare", "no-such-rev"]):
+        with pytest.raises(SystemExit) as exit_info:
+            bench.main(arguments)
+        assert exit_info.value.code == 2
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_processes_run_one_robot_alone_and_two_side_by_side(tmp_path, capsys, tiny_overrides):
+    out = tmp_path / "bench.json"
+    bench.main(
+        ["--only-processes", "--processes", "1", "--presentations", "1", "--json", str(out)]
+        + [o for o in tiny_overrides if o.startswith(("env.", "coder."))]
+    )
+    cases = json.loads(out.read_text())["processes"]["this code"]
+    assert cases["alone"]["processes"] == 1 and cases["two"]["processes"] == 2
+    for case in cases.values():
+        assert case["steps_per_second"] > 0 and case["cpu_ms_per_robot_iteration"] > 0
+    assert "2 side by side" in capsys.readouterr().out

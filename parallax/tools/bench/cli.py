@@ -258,10 +258,12 @@ def format_report(report: dict) -> str:
         lines.append(f"[{group}]")
         for name, value in figures.items():
             lines.append(f"  {name:<48} {value:>10.3f}")
-    lines.append(
-        "[end to end] robot-iterations per second (median over presentations; the cases take turns)"
-    )
-    for dev, by_b in report["end_to_end"].items():
+    if "end_to_end" in report:
+        lines.append(
+            "[end to end] robot-iterations per second (median over presentations; "
+            "the cases take turns)"
+        )
+    for dev, by_b in report.get("end_to_end", {}).items():
         for b, r in by_b.items():
             trainer = (
                 f"   with the distance learner {r['trainer_steps_per_second']:.1f} steps/s"
@@ -273,7 +275,7 @@ def format_report(report: dict) -> str:
                 f"lockstep {r['lockstep_ms']:.2f} ms   "
                 f"×{r['step_over_coder_bound']:.1f} of the coder bound" + trainer
             )
-    for dev, by_b in report["end_to_end"].items():
+    for dev, by_b in report.get("end_to_end", {}).items():
         for b, r in by_b.items():
             if "cpu_ms_per_robot_iteration" in r:
                 # a report may carry the core count with its ceiling only
@@ -296,7 +298,7 @@ def format_report(report: dict) -> str:
                 lines.append(
                     f"  {dev} {b:<6} the loop's thread per lockstep iteration, ms: {spent}"
                 )
-    for dev, rf in report["roofline"].items():
+    for dev, rf in report.get("roofline", {}).items():
         lockstep = (
             f"; a lockstep of 16 robots {rf['coder_bound_ms_B16']:.3f} ms "
             "(the Gram matrix and dictionary reads once)"
@@ -341,6 +343,10 @@ def format_report(report: dict) -> str:
                     f"  {b:<6} ≤ {c['steps_per_second']:.1f} robot-iterations/s "
                     f"(measured: {c['measured_over_ceiling']:.0%} of it)"
                 )
+    if "processes" in report:
+        from parallax.tools.bench.processes import format_processes
+
+        lines += format_processes(report["processes"])
     return "\n".join(lines)
 
 
@@ -369,6 +375,24 @@ def main(argv: list[str] | None = None) -> None:
         "experiment=recipe_multi_5_20_weighted",
     )
     parser.add_argument("--no-components", action="store_true", help="end to end and roofline only")
+    parser.add_argument(
+        "--processes",
+        type=int,
+        default=0,
+        metavar="ROUNDS",
+        help="also single-robot runs as processes, one alone and two side by side (machine-wide "
+        "robot-iterations/s), this many rounds of --presentations each",
+    )
+    parser.add_argument(
+        "--compare",
+        default=None,
+        metavar="REV",
+        help="with --processes: the same cases on the code of this git revision, in the same "
+        "rounds",
+    )
+    parser.add_argument(
+        "--only-processes", action="store_true", help="the process cases alone (with --processes)"
+    )
     parser.add_argument("--json", default=None, help="also write the report to this file")
     parser.add_argument(
         "--show",
@@ -386,6 +410,19 @@ def main(argv: list[str] | None = None) -> None:
             file=sys.stderr,
         )
         sys.exit(2)
+    if (args.compare or args.only_processes) and args.processes < 1:
+        print(
+            "parallax-bench: error: --compare and --only-processes need --processes",
+            file=sys.stderr,
+        )
+        sys.exit(2)
+    if args.compare:
+        from parallax.tools.bench.processes import revision_error
+
+        error = revision_error(args.compare)
+        if error:
+            print(f"parallax-bench: error: {error}", file=sys.stderr)
+            sys.exit(2)
     problem = file_problem(args.json) if args.json else None
     if problem:  # before the measurements, which take minutes
         print(
@@ -401,15 +438,24 @@ def main(argv: list[str] | None = None) -> None:
             print(f"parallax-bench: error: {error}", file=sys.stderr)
             sys.exit(2)
     robots = tuple(dict.fromkeys(args.robots))  # each B once, in the order given
-    report = run(
-        args.repeats,
-        args.presentations,
-        robots,
-        args.threads,
-        not args.no_components,
-        args.overrides,
-        tuple(dict.fromkeys(args.also)),
-    )
+    report = {"threads": args.threads, "torch": torch.__version__, "cuda": False}
+    if not args.only_processes:
+        report = run(
+            args.repeats,
+            args.presentations,
+            robots,
+            args.threads,
+            not args.no_components,
+            args.overrides,
+            tuple(dict.fromkeys(args.also)),
+        )
+    if args.processes:
+        from parallax.tools.bench import processes
+
+        overrides = ["curriculum=multi_5_10", f"train.threads={args.threads}", *args.overrides]
+        report["processes"] = processes.run(
+            args.processes, args.presentations, args.threads, overrides, args.compare
+        )
     print(format_report(report))
     text = json.dumps(report, indent=2)
     if args.json:
