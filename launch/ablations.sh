@@ -4,13 +4,13 @@
 # (replayed, ablation_y.sh / ablation_queue.sh). Then ablations.md: the hand-written reading
 # (docs/results/ablations_notes.md) followed by each report's tables and plots
 # (docs/results/ablations/*.md).
-#   SCALES_ARGS   overrides of the scale runs (default: train.presentations=60, the committed budget)
+#   SCALES_ARGS   overrides of the scale runs (default: none, each family at its own budget)
 #   SOURCE        runs whose eye movements the y / c ablations replay (default: the 5–20 cm
 #                 weighted runs of launch/reproduce.sh, cut at their perturbation)
 set -euo pipefail
 here="$(dirname "${BASH_SOURCE[0]}")"
 status=0
-read -ra scales_args <<< "${SCALES_ARGS:-train.presentations=60}"
+read -ra scales_args <<< "${SCALES_ARGS:-}"
 PARALLAX_EVAL="${PARALLAX_EVAL:-0}" bash "$here/ablation_scales.sh" "${scales_args[@]}" || status=$?
 if [[ -z "${SOURCE:-}" ]]; then
   # shellcheck disable=SC1091

@@ -18,7 +18,7 @@ and OpenCV for the cameras' pictures.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -266,21 +266,33 @@ class PanelDrawer:
         self.figure.clear()
 
 
-def panel_frames(watched: Watched, width: int = 960) -> Iterator[np.ndarray]:
-    """The frames of every pictured sample, in order."""
+def panel_frames(
+    watched: Watched, width: int = 960, picks: Sequence[int] | None = None
+) -> Iterator[np.ndarray]:
+    """The frames of every pictured sample in order; with ``picks``, only those of them (their
+    indices among the pictured samples), so that frames nobody shows are never drawn."""
+    pictured = [index for index, sample in enumerate(watched.samples) if sample.pictured]
+    chosen = pictured if picks is None else [pictured[k] for k in picks]
     drawer = PanelDrawer(watched, width)
     try:
-        for index, sample in enumerate(watched.samples):
-            if sample.pictured:
-                yield drawer.draw(index)
+        for index in chosen:
+            yield drawer.draw(index)
     finally:
         drawer.close()
 
 
+def pictured_count(watched: Watched) -> int:
+    return sum(1 for sample in watched.samples if sample.pictured)
+
+
+def montage_picks(total: int, count: int = 4) -> list[int]:
+    """``count`` indices spread evenly over ``total`` frames, the last included."""
+    return np.unique(np.linspace(0, total - 1, min(count, total)).round().astype(int)).tolist()
+
+
 def montage(frames: list[np.ndarray], count: int = 4) -> np.ndarray:
     """``count`` frames spread evenly over ``frames`` (the last included), two to a row."""
-    picks = np.unique(np.linspace(0, len(frames) - 1, min(count, len(frames))).round().astype(int))
-    chosen = [frames[i] for i in picks]
+    chosen = [frames[i] for i in montage_picks(len(frames), count)]
     if len(chosen) % 2:
         chosen.append(np.full_like(chosen[0], 255))
     rows = [np.concatenate(chosen[i : i + 2], axis=1) for i in range(0, len(chosen), 2)]

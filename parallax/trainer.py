@@ -48,12 +48,12 @@ from parallax.metrics import (
     position_label,
 )
 from parallax.movement import movement
-from parallax.panel import panel_frames, watched
+from parallax.panel import montage_picks, panel_frames, pictured_count, watched
 from parallax.parts import Parts
 from parallax.presentation import Presentation
 from parallax.record import PresentationRecord
 from parallax.run_folder import remove_leftovers, write_atomic
-from parallax.run_log import RunLog
+from parallax.run_log import RunLog, can_write_video
 from parallax.watch import Watch
 
 #: The video panel of train.image_every's presentations in TensorBoard: about this many frames
@@ -362,7 +362,9 @@ class Trainer:
         readout = distance_readout(self.cfg)
         title = f"presentation {self.presentation}: panel at {pres.distances[0]:.1f} m"
         shown = watched(watch, pres, self.exp.parts, readout, title, self.learn_distance.truths)
-        return list(panel_frames(shown, width=PANEL_WIDTH))
+        # without a video writer TensorBoard gets a montage of four frames: draw only those
+        picks = None if can_write_video() else montage_picks(pictured_count(shown))
+        return list(panel_frames(shown, width=PANEL_WIDTH, picks=picks))
 
     def _start(self) -> bool:
         """Resume from the checkpoint if asked and there is one (else start the metrics afresh),

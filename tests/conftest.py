@@ -24,9 +24,15 @@ TINY = [
     "distance.hidden=4",
     "train.presentations=6",
     "train.checkpoint_every=2",
-    "train.image_every=3",
+    # TensorBoard's pictures and the watched presentation's panel cost a second a tiny run:
+    # the tests of them ask for them (IMAGES)
+    "train.image_every=1000",
     "metrics.mae_window=20",
 ]
+
+
+#: The pictures every third presentation, for the tests of TensorBoard's images and panel.
+IMAGES = "train.image_every=3"
 
 
 @pytest.fixture

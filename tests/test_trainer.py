@@ -32,7 +32,9 @@ def _without_timing(summary: dict) -> dict:
 
 
 def test_run_writes_everything(tmp_path, tiny_overrides):
-    summary = _train(tmp_path, tiny_overrides)
+    from tests.conftest import IMAGES
+
+    summary = _train(tmp_path, [*tiny_overrides, IMAGES])
     lines = (tmp_path / "metrics.jsonl").read_text().splitlines()
     assert len(lines) == 6
     records = [json.loads(line) for line in lines]

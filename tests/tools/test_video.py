@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from parallax.tools import render, video
-from tests.conftest import TINY, train_tiny_run
+from tests.conftest import IMAGES, TINY, train_tiny_run
 
 #: tab:blue and tab:orange, the colours of the pan and of α* in the panel's plots.
 BLUE, ORANGE = (31, 119, 180), (255, 127, 14)
@@ -20,7 +20,7 @@ ITERATIONS = 2 * 4
 
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
-    return train_tiny_run(tmp_path_factory.mktemp("run") / "run")
+    return train_tiny_run(tmp_path_factory.mktemp("run") / "run", [IMAGES])
 
 
 def near(region: np.ndarray, colour: tuple[int, int, int], tolerance: int = 60) -> int:
@@ -154,7 +154,7 @@ def test_tensorboard_panel_every_image_every(tiny_run) -> None:
     images = events.Images("world/presentation")
     lines = [json.loads(line) for line in (tiny_run / "metrics.jsonl").read_text().splitlines()]
     # train.image_every=3 of 6 presentations: the 3rd and the 6th, at their iteration counts
-    every = int(next(o for o in TINY if o.startswith("train.image_every=")).split("=")[1])
+    every = int(IMAGES.split("=")[1])
     kept = [line["steps"] for line in lines if line["presentation"] % every == 0]
     assert [image.step for image in images] == kept == [lines[2]["steps"], lines[5]["steps"]]
     # without moviepy: four of its frames, 640 × 360 each, two to a row
