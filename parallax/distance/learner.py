@@ -263,9 +263,15 @@ class DistanceLearner:
         queue; this is that probable protocol. Empty before the first fit, and when the targets
         are not the panels' distances (odometry).
         """
+        found = self.queue_predictions()
+        return {} if found is None else distance_error_by_range(*found)
+
+    def queue_predictions(self) -> tuple[Tensor, Tensor] | None:
+        """The network's answers for the vectors of its queue, and their distances (what
+        :meth:`queue_error` scores); None where it has none to score."""
         if not self.is_ready or self.target_source.walks:
-            return {}
-        return distance_error_by_range(self.predict(self.queue.inputs), self.queue.targets)
+            return None
+        return self.predict(self.queue.inputs), self.queue.targets
 
     def to(self, device: torch.device | str) -> DistanceLearner:
         """Moves the network, the queue and the input weights to ``device`` (in place; returns

@@ -29,6 +29,7 @@ from tqdm import tqdm
 from parallax import checkpoint
 from parallax.config import READOUT_PANS, distance_readout, load_run_config
 from parallax.distance_step import distance_step
+from parallax.envs.stimuli import SPLITS
 from parallax.movement import planned_route
 from parallax.panel import PANEL_COLOURS, Watched, frame_size, panel_frames, watched
 from parallax.tools.evaluate import frozen_experiment, read_checkpoint
@@ -296,7 +297,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument(
         "--split",
-        choices=["heldout", "train"],
+        choices=SPLITS,
         default="heldout",
         help="photographs never seen in training (heldout, default) or those the eye learnt on",
     )

@@ -64,10 +64,10 @@ def combo_overrides(scaling: str, y: float | None, common: Sequence[str]) -> lis
 
 
 def _queue_errors(learner) -> list[float]:
-    if learner is None or not learner.is_ready:
+    found = None if learner is None else learner.queue_predictions()
+    if found is None:
         return []
-    predicted = np.asarray(learner.predict(learner.queue.inputs.cpu().numpy()), dtype=np.float64)
-    truth = learner.queue.targets.cpu().numpy()
+    predicted, truth = (np.asarray(t.cpu(), dtype=np.float64) for t in found)
     return (100.0 * np.abs(predicted - truth) / truth).tolist()
 
 
