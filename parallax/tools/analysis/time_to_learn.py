@@ -211,13 +211,24 @@ def time_to_learn(run_dir: str | Path, threshold: float = 0.2, trials: int = 100
     if rows:
         worst = max(rows[-1]["mae"].items(), key=lambda kv: kv[1])
         result["worst_position_at_end"] = {"position": worst[0], "mae_deg": worst[1]}
-    for i, row in enumerate(rows):
-        if (i + 1) * robots >= trials and all(v <= threshold for v in row["mae"].values()):
-            result["presentation"], result["steps"] = row["presentation"], row["steps"]
-            clock = _wall_clock(run_dir)
-            result["wall_time_s"] = clock.get(row["steps"])
-            break
+    row = first_learnt(rows, robots, trials, threshold)
+    if row is not None:
+        result["presentation"], result["steps"] = row["presentation"], row["steps"]
+        result["wall_time_s"] = _wall_clock(run_dir).get(row["steps"])
     return result
+
+
+def first_learnt(
+    rows: list[dict], robots: int, trials: int, threshold: float, positions=None
+) -> dict | None:
+    """The first of :func:`recent_mae_per_position`'s rows with ``trials`` trials seen per
+    position (``robots`` per presentation) whose recent MAE is ≤ threshold at every position
+    of ``positions`` (all if None); None if there is none."""
+    for i, row in enumerate(rows):
+        mae = row["mae"] if positions is None else {p: row["mae"][p] for p in positions}
+        if (i + 1) * robots >= trials and all(v <= threshold for v in mae.values()):
+            return row
+    return None
 
 
 def learning_curve(run_dir: str | Path, trials: int = 100) -> dict:

@@ -354,13 +354,16 @@ def readme_table(data: dict) -> str:
     return md_table(header, rows)
 
 
-def write_readme_table(readme: Path, table: str) -> None:
+def write_readme_table(
+    readme: Path, table: str, begin: str = README_BEGIN, end: str = README_END
+) -> None:
+    """Put ``table`` between the README's marker lines ``begin`` and ``end``."""
     text = readme.read_text()
-    if README_BEGIN not in text or README_END not in text:
-        raise ReportError(f"{readme}: no lines {README_BEGIN!r} … {README_END!r} to write between")
-    head, rest = text.split(README_BEGIN, 1)
-    _, tail = rest.split(README_END, 1)
-    readme.write_text(f"{head}{README_BEGIN}\n\n{table}\n\n{README_END}{tail}")
+    if begin not in text or end not in text:
+        raise ReportError(f"{readme}: no lines {begin!r} … {end!r} to write between")
+    head, rest = text.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    readme.write_text(f"{head}{begin}\n\n{table}\n\n{end}{tail}")
 
 
 def readme_block(readme: Path) -> str:
