@@ -311,4 +311,9 @@ if [[ -f "$report_root/$middle.json" && -f "$report_root/recipe.json" ]] || [[ -
     "$report_root/recipe.json" --middle "$middle" --out "$report_root" --readme README.md \
     "${notes[@]}" || status=$?
 fi
+
+# the paper's claims, each with a verdict, from the same records (docs/results/claims.md and the
+# README's list; the scales claim reads the runs of launch/ablation_scales.sh when they are there)
+px_run python -m parallax.tools.report.claims --records "${RECORD_ROOT:-$report_root/runs}" \
+  --out "$report_root" --readme README.md || status=$?
 exit "$status"

@@ -221,7 +221,7 @@ CLAIMS: tuple[Claim, ...] = (
         "Multiple lateral positions estimate distance better than single ones",
         "Fig. 10 shows that the multiple lateral positions strategies provide the better overall "
         "performances comparing to the average and the minimum of the single lateral position.",
-        "§6, Fig. 10 (Fig. 11 after the perturbation)",
+        "§6, Fig. 10; Fig. 11 after the perturbation",
         _multi_vs_singles("before", "Fig. 10") + _multi_vs_singles("after", "Fig. 11"),
         "The single-position runs keep no model to evaluate, so both sides are the trainer's "
         "online error (its prediction of each new s before learning it, over its last window): "
@@ -274,7 +274,7 @@ CLAIMS: tuple[Claim, ...] = (
         "Large single movements (15, 20 cm) are harder for the eye",
         "As shown in Table 2, all of the simulations except for the 15 cm and 20 cm single "
         "lateral position show a similar performance for the last 100 trials eye movement MAE.",
-        "§4.2.2, Table 2 (Table 3 after the perturbation)",
+        "§4.2.2, Table 2; Table 3 after the perturbation",
         (
             _large_singles("before", paper.TABLE2, "Table 2"),
             _large_singles("after", paper.TABLE3, "Table 3"),
@@ -304,7 +304,7 @@ CLAIMS: tuple[Claim, ...] = (
         "The two scales together are better than either alone",
         "Note that the fine scale helps in fine-tuning the eye movements. [...] having only one "
         "scale might prevent the system from learning appropriately.",
-        "§3.3 (sensory coding; its reference [4])",
+        "§3.3, sensory coding, after its reference [4]",
         tuple(_scales(s, m) for m in ("eye", "distance") for s in ("coarse", "fine")),
         "The scale ablation (`bash launch/ablation_scales.sh`): each family's scale-ablation "
         "experiment (paper_multi_5_10, recipe_multi_5_20_weighted) with `coder=coarse` or "

@@ -351,8 +351,8 @@ def _anchor(title: str) -> str:
 
 def readme_lines(result: dict, doc: str = "docs/results/claims.md") -> str:
     return "\n".join(
-        f"- [{c['number']}. {c['claim']}]({doc}#{c['number']}-{_anchor(c['claim'])}) "
-        f"({c['where']}): paper family {c['verdict']['paper_family'].split(' (')[0]}; "
+        f"- [{c['number']}. {c['claim']}]({doc}#{c['number']}-{_anchor(c['claim'])}), "
+        f"{c['where']}: paper family {c['verdict']['paper_family'].split(' (')[0]}; "
         f"ours {c['verdict']['ours'].split(' (')[0]}."
         for c in result["claims"]
     )
