@@ -183,6 +183,7 @@ def _children(pid: int) -> list[int]:
     return found
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(
     not Path("/proc/self/stat").exists(), reason="finds the submitit task through /proc"
 )
@@ -251,11 +252,22 @@ def _dry_run(script: str, tmp_path: Path, *args: str, **settings: str) -> list[s
     return result.stdout.splitlines()
 
 
+@pytest.fixture(scope="module")
+def reproduction_dry_run(tmp_path_factory) -> tuple[Path, list[str]]:
+    """launch/reproduce.sh's commands with one extra override, printed once for the tests that
+    read them (it composes every experiment file, tens of seconds)."""
+    root = tmp_path_factory.mktemp("reproduce")
+    return root, _dry_run("reproduce.sh", root, "train.presentations=7")
+
+
 @pytest.mark.parametrize("script", LAUNCH_SCRIPTS)
-def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path):
+def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path, request):
     path = REPO / "launch" / script
     subprocess.run(["bash", "-n", str(path)], check=True)
-    lines = _dry_run(script, tmp_path, "train.presentations=7")
+    if script == "reproduce.sh":
+        tmp_path, lines = request.getfixturevalue("reproduction_dry_run")
+    else:
+        lines = _dry_run(script, tmp_path, "train.presentations=7")
     sweeps = [l for l in lines if l.startswith("parallax-train -m ")]
     assert sweeps, lines
     for line in sweeps:
@@ -269,8 +281,10 @@ def test_launch_scripts_parse_and_pass_extra_overrides(script, tmp_path):
     assert all("--out docs/results" in line for line in report)
 
 
-def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_files(tmp_path):
-    lines = _dry_run("reproduce.sh", tmp_path)
+def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_files(
+    reproduction_dry_run,
+):
+    _, lines = reproduction_dry_run
     trained = " ".join(l for l in lines if l.startswith("parallax-train -m "))
     replayed = [l for l in lines if l.startswith("parallax-replay ")]
     # the rows without weighting, and the recipe less a distance-side improvement, are replays
@@ -296,9 +310,11 @@ def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_fil
     assert "env.stimuli.source=procedural" in settings
     assert any(s.startswith("env.stimuli.dir=") for s in settings)
     assert all(args.robots == 16 and args.greedy_only for args in parsed)
-    assert lines[-1].startswith("python -m parallax.tools.report.compare ")
+    # the three-column comparison, then the claims read from the same records
+    compare = [l for l in lines if l.startswith("python -m parallax.tools.report.compare ")]
+    assert len(compare) == 1 and lines[-1].startswith("python -m parallax.tools.report.claims ")
     # the middle column is the paper family's, its open settings from its lineage
-    assert "/paper.json " in lines[-1] and "--middle paper" in lines[-1]
+    assert "/paper.json " in compare[0] and "--middle paper" in compare[0]
     assert any(l.startswith("python -m parallax.tools.report.leave_one_out ") for l in lines)
 
 
@@ -322,6 +338,7 @@ def test_the_reproduction_does_not_train_a_finished_run_again(tmp_path):
     assert len(trained) == 2  # the other recipe files, all three seeds
 
 
+@pytest.mark.slow
 def test_a_bad_job_fails_alone_in_a_joblib_sweep(tmp_path, tiny_overrides):
     """One job with an invalid value must not take the launcher's other jobs down with it."""
     sweep_dir = tmp_path / "sweep"

@@ -266,7 +266,9 @@ def test_zscore_statistics_forget_beyond_their_horizon() -> None:
     assert float(forgetting.normalizer.count) == 200.0
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize(
+    "seed", [0, pytest.param(1, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow)]
+)
 def test_learns_to_correct_a_synthetic_pursuit_offset(seed: int) -> None:
     # Tuned, non-negative, ~0.006 activities with texture and noise; reward −|offset|.
     # The schema's settings (except the run-time sizes), with centred_unit features and without

@@ -126,8 +126,10 @@ def test_threads_are_told_apart_by_the_part_of_the_step_they_run():
     assert 0.05 <= spent["main"] <= 0.5
 
 
-def test_also_adds_a_case_for_every_b_measured_in_the_same_run(tmp_path, capsys):
+def test_also_adds_a_case_for_every_b_measured_in_the_same_run(tmp_path, capsys, tiny_overrides):
     out = tmp_path / "bench.json"
+    # the shrunken world, coder and learner: this test reads the report's shape, not its speed
+    shrunken = [o for o in tiny_overrides if o.startswith(("env.", "coder.", "distance."))]
     bench.main(
         [
             "--no-components",
@@ -139,6 +141,7 @@ def test_also_adds_a_case_for_every_b_measured_in_the_same_run(tmp_path, capsys)
             "env.robots_per_turn=1",
             "--json",
             str(out),
+            *shrunken,
         ]
     )
     printed = capsys.readouterr().out
@@ -147,7 +150,7 @@ def test_also_adds_a_case_for_every_b_measured_in_the_same_run(tmp_path, capsys)
     cases = report["end_to_end"]["cpu"]
     assert list(cases) == ["B=2", "B=2 env.robots_per_turn=1"]
     # the bound of a lockstep of two robots, whichever setting the case adds
-    work = bench.coder_work_per_frame(compose(["curriculum=multi_5_10"]))
+    work = bench.coder_work_per_frame(compose(["curriculum=multi_5_10", *shrunken]))
     for name, case in cases.items():
         assert case["robots"] == 2 and case["steps_per_second"] > 0
         assert case["coder_bound_ms"] == bench.coder_bound_ms(work, report["roofline"]["cpu"], 2)
