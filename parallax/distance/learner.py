@@ -218,6 +218,8 @@ class DistanceLearner:
             per_sample=True,
             validation=validation,
             max_fail=self.max_fail,
+            # residual = d(s) − target: its Jacobian is the network's own
+            jacobian=lambda inputs, _: self.network.parameter_jacobian(inputs),
         )
         self.fits += 1
         mse = result.sse / targets.numel()

@@ -17,7 +17,9 @@ P extra rows).
 The residuals come from a closure ``closure(forward, *batch) -> residuals`` where ``forward``
 calls the model with the candidate parameters: ``lambda forward, x, y: forward(x) - y``. With
 ``per_sample=True`` the rows of ``batch`` are independent samples and the Jacobian is built one
-sample at a time under ``vmap`` (cheaper than a full ``jacrev`` for the distance network).
+sample at a time under ``vmap`` (cheaper than a full ``jacrev`` for the distance network). A
+model that knows its Jacobian in closed form hands it over as ``jacobian(*batch) -> (m, P)``,
+the Jacobian of the residuals, and autograd is not called.
 """
 
 from __future__ import annotations
@@ -34,6 +36,10 @@ from parallax.config.schema import LevenbergMarquardtConfig
 
 #: ``closure(forward, *batch)`` returns the residual tensor (any shape; it is flattened).
 ResidualClosure = Callable[..., Tensor]
+
+#: ``jacobian(*batch)`` returns the residuals' Jacobian, (number of residuals, parameters), in
+#: the order of the model's ``named_parameters()``.
+JacobianFunction = Callable[..., Tensor]
 
 #: μ is never decreased below this, so JᵀJ + μI stays positive definite in float64.
 MU_FLOOR = 1e-20
@@ -133,8 +139,15 @@ class LevenbergMarquardt:
         return float(sse)
 
     def _jacobian(
-        self, flat: Tensor, closure: ResidualClosure, batch: tuple[Tensor, ...], per_sample: bool
+        self,
+        flat: Tensor,
+        closure: ResidualClosure,
+        batch: tuple[Tensor, ...],
+        per_sample: bool,
+        jacobian: JacobianFunction | None,
     ) -> Tensor:
+        if jacobian is not None:
+            return jacobian(*batch)
         if not per_sample:
             return jacrev(lambda f: self._residuals(f, closure, batch))(flat)
 
@@ -151,10 +164,14 @@ class LevenbergMarquardt:
 
     # -- the algorithm ------------------------------------------------------------------------
     def step(
-        self, closure: ResidualClosure, *batch: Tensor, per_sample: bool = False
+        self,
+        closure: ResidualClosure,
+        *batch: Tensor,
+        per_sample: bool = False,
+        jacobian: JacobianFunction | None = None,
     ) -> LMStepResult:
-        """One epoch: a Jacobian, then damped steps until one lowers Σe² (+ λ‖w‖²) or
-        μ > mu_max."""
+        """One epoch: a Jacobian (``jacobian(*batch)`` when given, else autograd's), then damped
+        steps until one lowers Σe² (+ λ‖w‖²) or μ > mu_max."""
         if per_sample and (not batch or len({t.shape[0] for t in batch}) != 1):
             raise ValueError(
                 "per_sample=True needs batch tensors that share their first dimension, "
@@ -176,7 +193,7 @@ class LevenbergMarquardt:
                 f"max_jacobian_elements={self.max_jacobian_elements}"
             )
 
-        jacobian = self._jacobian(flat, closure, batch, per_sample).double()
+        jacobian = self._jacobian(flat, closure, batch, per_sample, jacobian).double()
         errors = residuals.double()
         gradient = jacobian.T @ errors
         weights = flat.double()
@@ -211,6 +228,7 @@ class LevenbergMarquardt:
         per_sample: bool = False,
         validation: Callable[[], float] | None = None,
         max_fail: int | None = None,
+        jacobian: JacobianFunction | None = None,
     ) -> LMRunResult:
         """Up to ``epochs`` epochs; stops early at min_grad or mu_max.
 
@@ -228,7 +246,7 @@ class LevenbergMarquardt:
         if validation is not None:
             best_error, best_flat, fails = validation(), self._flat(), 0
         for _ in range(int(epochs)):
-            result = self.step(closure, *batch, per_sample=per_sample)
+            result = self.step(closure, *batch, per_sample=per_sample, jacobian=jacobian)
             accepted += int(result.accepted)
             if validation is not None and result.accepted:
                 error = validation()

@@ -45,7 +45,7 @@ def minpack_sse(
             return optimizer._residuals(torch.from_numpy(flat), regression, batch).numpy()
 
     def jacobian(flat):
-        return optimizer._jacobian(torch.from_numpy(flat), regression, batch, True).numpy()
+        return optimizer._jacobian(torch.from_numpy(flat), regression, batch, True, None).numpy()
 
     solution = least_squares(
         residuals, optimizer._flat().numpy().copy(), jac=jacobian, method="lm", max_nfev=5000
@@ -115,10 +115,38 @@ def test_per_sample_jacobian_equals_full_jacobian():
     inputs, targets = torch.from_numpy(pans), torch.from_numpy(distances)
     optimizer = trainlm(scaled_network(inputs, targets, hidden=5, seed=1))
     flat = optimizer._flat()
-    per_sample = optimizer._jacobian(flat, regression, (inputs, targets), True)
-    full = optimizer._jacobian(flat, regression, (inputs, targets), False)
+    per_sample = optimizer._jacobian(flat, regression, (inputs, targets), True, None)
+    full = optimizer._jacobian(flat, regression, (inputs, targets), False, None)
     assert per_sample.shape == (20, optimizer.num_params)
     torch.testing.assert_close(per_sample, full, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("inputs", "hidden", "rows", "scaling"),
+    [(16, 30, 240, "per_input"), (6, 30, 100, "none"), (2, 4, 3, "global"), (11, 30, 1, "none")],
+)
+def test_the_networks_closed_form_jacobian_is_autograds_bit_for_bit(inputs, hidden, rows, scaling):
+    generator = torch.Generator().manual_seed(inputs * rows)
+    pans = 3 * torch.randn(rows, inputs, generator=generator, dtype=torch.float64) + 5
+    distances = 7 * torch.rand(rows, generator=generator, dtype=torch.float64) + 3
+    network = DistanceMLP(inputs, hidden, input_scaling=scaling, generator=generator)
+    if rows > 1:
+        network.fit_scaling(pans, distances, preserve_function=False)
+    optimizer = trainlm(network)
+    flat = optimizer._flat()
+    autograd = optimizer._jacobian(flat, regression, (pans, distances), True, None)
+    assert torch.equal(network.parameter_jacobian(pans), autograd)
+    # so a fit that is handed it takes the same steps as one that differentiates
+    fits = []
+    for closed_form in (False, True):
+        model = DistanceMLP(inputs, hidden, input_scaling=scaling)
+        model.load_state_dict(network.state_dict())
+        jacobian = (lambda x, _, m=model: m.parameter_jacobian(x)) if closed_form else None
+        trainlm(model).run(
+            regression, pans, distances, epochs=5, per_sample=True, jacobian=jacobian
+        )
+        fits.append(torch.cat([p.detach().reshape(-1) for p in model.parameters()]))
+    assert torch.equal(*fits)
 
 
 def test_dual_and_primal_steps_agree():
