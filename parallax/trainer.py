@@ -47,11 +47,11 @@ from parallax.metrics import (
     finite_or_none,
     position_label,
 )
-from parallax.movement import movement
 from parallax.panel import montage_picks, panel_frames, pictured_count, watched
 from parallax.parts import Parts
 from parallax.presentation import Presentation
 from parallax.record import PresentationRecord
+from parallax.routes import movement
 from parallax.run_folder import remove_leftovers, write_atomic
 from parallax.run_log import RunLog, can_write_video
 from parallax.watch import Watch
