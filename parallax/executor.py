@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -49,12 +50,12 @@ class Frames:
         """Whether this is a trial's first iteration (the step into it crossed the pan's reset)."""
         return self.observations[0].iteration == 0
 
-    @property
+    @cached_property
     def pans(self) -> np.ndarray:
         """(B,) α of each robot (deg)."""
         return np.array([o.pan for o in self.observations])
 
-    @property
+    @cached_property
     def rewards(self) -> np.ndarray:
         """(B,) the coder's reward −(eC + eF) for each robot's image, in float64."""
         return self.output.reward.cpu().numpy().astype(np.float64)
@@ -120,10 +121,10 @@ class Executor:
         observations, encodings = self._encode(turn)
         self._encodings += encodings
         output = CoderOutput.join([encoding.output for encoding in encodings])
-        frames = Frames(turn, self.turns[turn], observations, output)
-        if frames.starts_trial:
+        offer = None
+        if observations[0].iteration == 0:  # a trial's first: θ(I0, I0) on demand
             offer = lambda: self._reference_state(turn, observations)  # noqa: E731
-            frames = Frames(turn, frames.robots, observations, output, reference=offer)
+        frames = Frames(turn, self.turns[turn], observations, output, reference=offer)
         if self._learns and turn == len(self.turns) - 1:
             self._due = True
             if not frames.starts_trial:
