@@ -132,8 +132,7 @@ class Tally:
     ) -> Presentation:
         """The record, from the tally and the last observations (before every robot's first,
         the distances and textures are unknown, NaN and −1)."""
-        seen = all(o is not None for o in self.observations)
-        obs: list[Observation] = self.observations if seen else []  # type: ignore[assignment]
+        obs = self.observations if all(o is not None for o in self.observations) else []
         view = None
         if keep_view:
             view = np.concatenate([obs[0].reference, obs[0].image], axis=1)
