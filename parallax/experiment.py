@@ -20,10 +20,12 @@ from parallax import loop
 from parallax.coding import MultiScaleCoder
 from parallax.distance import DistanceLearner
 from parallax.distance.planner import MovementPlanner
+from parallax.executor import Executor
 from parallax.lockstep import Lockstep, robot_turns
 from parallax.parts import Parts, build
 from parallax.policy import NaturalActorCritic
 from parallax.presentation import Presentation
+from parallax.routes import SWEEP, Route
 
 
 class Experiment:
@@ -111,13 +113,13 @@ class Experiment:
         learn: bool = True,
         greedy: bool = False,
         keep_view: bool = False,
-        route: loop.Route | None = None,
-        watch: Callable[[loop.Executor], loop.Executor] | None = None,
+        route: Route = SWEEP,
+        watch: Callable[[Executor], Executor] | None = None,
     ) -> Presentation:
         """All robots live through one presentation (:func:`parallax.loop.presentation`), its
         steps scheduled on threads by a :class:`~parallax.lockstep.Lockstep`; learning on or
-        frozen; ``route`` (one robot, §7) instead of sweeping L; ``watch`` (e.g.
-        :meth:`parallax.watch.Watch.around`) stands in front of the lockstep."""
+        frozen; on ``route`` (:mod:`parallax.routes`: a chosen one takes one robot, §7);
+        ``watch`` (e.g. :meth:`parallax.watch.Watch.around`) stands in front of the lockstep."""
         run = Lockstep(self.envs, self.coder, self.turns)
         executor = run if watch is None else watch(run)
         pres = loop.presentation(

@@ -11,10 +11,10 @@ runs them so that rendering, encoding and the dictionary step overlap:
 * a turn's robots are encoded chunk by chunk as their frames arrive (:func:`encode_chunk`: 4
   robots at a time on the CPU, all of them in one call on a GPU);
 * the dictionary step of an iteration, from every turn's encoding, runs on the coder's helper
-  thread from :meth:`Lockstep.start_dictionary_step` on (after the last turn's encoding), while
-  the policy takes the last turn; the next iteration's first encoding waits for it, and leaving
-  the ``with`` block waits for the last one — also when an error leaves it, so nothing runs on
-  behind it.
+  thread from the last turn's encoding on (at a trial's first iteration, from θ(I0, I0) or the
+  turn's step on: :class:`parallax.executor.Executor`), while the policy takes the last turn; the
+  next iteration's first encoding waits for it, and leaving the ``with`` block waits for the last
+  one — also when an error leaves it, so nothing runs on behind it.
 
 :attr:`Lockstep.seconds` adds up where the calling thread spent its time in the lockstep:
 waiting for the frames it encodes, waiting for the dictionary step, and encoding (its own scale,
@@ -22,7 +22,7 @@ and waiting for the helper's); the rest of its time is the loop's own (the polic
 presentation's start (its worlds' resets and the references' patches). ``parallax-bench`` prints
 it per lockstep iteration, to show which part holds a step up.
 
-Every value is that of :class:`parallax.loop.InOrder`, the plain sequence on one thread — in the
+Every value is that of :class:`parallax.executor.InOrder`, the plain sequence on one thread — in the
 same order per robot and per dictionary, so the results do not depend on the schedule
 (``tests/test_experiment.py``) — with one torch thread (``train.threads=1``, the default): with
 more, the matrix library may split a product of a chunk's rows otherwise than one of all rows.
@@ -34,13 +34,14 @@ import time
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, wait
 from contextlib import contextmanager
-from typing import Any, NamedTuple
+from typing import Any
 
-import numpy as np
 import torch
 
 import parallax.envs
-from parallax.coding import CoderOutput, Encoding, MultiScaleCoder
+from parallax.coding import Encoding, MultiScaleCoder
+from parallax.envs.observation import Observation
+from parallax.executor import Executor, stack
 
 #: Robots whose frames are encoded in one call on the CPU (the last chunk may be smaller): a small
 #: chunk starts encoding sooner after the first frames arrive, a large one makes fewer calls.
@@ -66,20 +67,7 @@ def robot_turns(robots: int, robots_per_turn: int) -> list[slice]:
 WAITS = ("frames", "dictionary_step", "encoding")
 
 
-class Frames(NamedTuple):
-    """The robots' observations after a reset or a step, and the coder's output for their
-    images (computed with the dictionaries before this iteration's dictionary step)."""
-
-    observations: list[dict]
-    output: CoderOutput
-
-
-def stack_images(observations: Sequence[dict], key: str, device: torch.device) -> torch.Tensor:
-    """The robots' ``key`` images ("image" I(t) or "reference" I0) as one (B, H, W, 3) tensor."""
-    return torch.from_numpy(np.stack([o[key] for o in observations])).to(device)
-
-
-class Lockstep:
+class Lockstep(Executor):
     """One presentation of B robots' worlds stepped together; use it as a context manager.
 
     The robots take their turns in groups (``turns``: consecutive robot slices, in robot order):
@@ -87,44 +75,34 @@ class Lockstep:
     actions are known (:meth:`step`), so they render while the later turns are encoded and act."""
 
     def __init__(self, envs: Sequence[Any], coder: MultiScaleCoder, turns: Sequence[slice]) -> None:
-        self.envs = list(envs)
-        self.coder = coder
-        self.turns = list(turns)
+        super().__init__(envs, coder, turns)
         self._world = parallax.envs.gl_thread()
         self._futures: list[list[Future]] = [[] for _ in self.turns]  # each turn's next frames
-        # this iteration's encodings so far, chunk by chunk, for its dictionary step
-        self._encodings: list[Encoding] = []
         self._learning: Future | None = None  # a dictionary step running on the helper thread
         #: the calling thread's seconds in each of :data:`WAITS` so far
         self.seconds = dict.fromkeys(WAITS, 0.0)
 
-    def __enter__(self) -> Lockstep:
-        return self
-
     def __exit__(self, kind: Any, error: BaseException | None, traceback: Any) -> None:
         if error is None:
-            self.finish_dictionary_step()
+            super().__exit__(kind, error, traceback)
         elif self._learning is not None:
             wait([self._learning])  # it reads and writes the dictionaries: never leave it running
 
-    def reset(self) -> None:
-        """Every world draws its stimulus and the coder caches every I0; :meth:`frames` then
-        encodes the first frames, turn by turn."""
+    def _reset_worlds(self) -> list[Observation]:
+        """Every world resets on the GL thread; :meth:`frames` then encodes the first frames,
+        turn by turn."""
         futures = [self._world.submit(env.reset) for env in self.envs]
-        references = [future.result().observation for future in futures]
-        self.coder.set_reference(stack_images(references, "reference", self.coder.device))
+        observations = [Observation.of(future.result().observation) for future in futures]
         self._futures = [futures[robots] for robots in self.turns]
+        return observations
 
-    def frames(self, turn: int) -> Frames:
-        """The turn's robots' frames, encoded as they arrive; the first turn of an iteration
-        waits for the running dictionary step and encodes with the dictionaries it leaves."""
-        if turn == 0:
-            self.finish_dictionary_step()
-            self._encodings = []
+    def _encode(self, turn: int) -> tuple[list[Observation], list[Encoding]]:
+        """The turn's robots' frames, encoded as they arrive (the first turn of an iteration
+        after the running dictionary step, :meth:`Executor.frames`)."""
         futures, self._futures[turn] = self._futures[turn], []
         return self._encode_as_they_arrive(futures, self.turns[turn].start)
 
-    def step(self, turn: int, pan_increments: Sequence[float]) -> None:
+    def _step_worlds(self, turn: int, pan_increments: Sequence[float]) -> None:
         """Each robot of the turn turns its eyes by its increment (degrees) and renders, on the
         GL thread after the worlds already handed to it."""
         envs = self.envs[self.turns[turn]]
@@ -133,14 +111,14 @@ class Lockstep:
             for env, increment in zip(envs, pan_increments, strict=True)
         ]
 
-    def start_dictionary_step(self) -> None:
+    def _start_dictionary_step(self) -> None:
         """The coder's dictionary step from this iteration's encodings (every turn's), on its
         helper thread (CPU; elsewhere at once). Nothing may read the dictionaries until it has
         finished: the next :meth:`frames` of turn 0 waits for it."""
-        self.finish_dictionary_step()
+        self._finish_dictionary_step()
         self._learning = self.coder.learn_from_async(self._encodings)
 
-    def finish_dictionary_step(self) -> None:
+    def _finish_dictionary_step(self) -> None:
         """Wait for the running dictionary step, if any, and raise its error, if any."""
         learning, self._learning = self._learning, None
         if learning is not None:
@@ -156,23 +134,20 @@ class Lockstep:
         finally:
             self.seconds[wait] += time.perf_counter() - started
 
-    def _encode_as_they_arrive(self, futures: list[Future], first_robot: int = 0) -> Frames:
-        timesteps: list[Any] = []
+    def _encode_as_they_arrive(
+        self, futures: list[Future], first_robot: int = 0
+    ) -> tuple[list[Observation], list[Encoding]]:
+        observations: list[Observation] = []
         encodings = []
         chunk = encode_chunk(self.coder.device, len(futures))
         for first in range(0, len(futures), chunk):
             count = min(chunk, len(futures) - first)
             with self._timed("frames"):
                 arrived = [future.result() for future in futures[first : first + count]]
-            timesteps += arrived
             with self._timed("encoding"):
-                images = stack_images(
-                    [ts.observation for ts in arrived], "image", self.coder.device
-                )
+                seen = [Observation.of(timestep.observation) for timestep in arrived]
+                images = stack([o.image for o in seen], self.coder.device)
                 robots = slice(first_robot + first, first_robot + first + count)
                 encodings.append(self.coder.encode_frame(images, robots))
-        self._encodings += encodings
-        return Frames(
-            observations=[ts.observation for ts in timesteps],
-            output=CoderOutput.join([encoding.output for encoding in encodings]),
-        )
+            observations += seen
+        return observations, encodings

@@ -1,21 +1,23 @@
 """What B robots did in one stimulus presentation (paper §3.2, Fig. 3), gathered as it runs.
 
 :class:`Tally` collects, iteration by iteration, what :func:`parallax.loop.presentation` reports:
-q_p (the pan at each trial's last iteration) and α* there, the coder's mean reward and errors, the
-policy's mean statistics; :class:`Presentation` is the result. :class:`Step` is a turn's last
-step, which the policy learns from at the next iteration.
+the positions visited, q_p (the pan at each trial's last iteration) and α* there, the coder's mean
+reward and errors; :class:`Presentation` is the result, with the policy's mean statistics.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from parallax.coding import CoderOutput
+from parallax.envs.observation import Observation
 from parallax.metrics import position_label
+
+if TYPE_CHECKING:
+    from parallax.executor import Frames
 
 
 @dataclass
@@ -51,15 +53,6 @@ class Presentation:
         return [position_label(l) for l in self.lateral_positions]
 
 
-class Step(NamedTuple):
-    """A robot's last step within the trial, for the transition the policy learns from next."""
-
-    state: torch.Tensor  # (B, input_dim) what the policy acted on
-    action: torch.Tensor  # (B,) the action indices
-    rewards: np.ndarray  # (B,) the coder's rewards for the images acted on
-    increments: np.ndarray  # (B,) the pan increments sent (deg)
-
-
 class Tally:
     """What one presentation reports (:class:`Presentation`), gathered iteration by iteration."""
 
@@ -80,15 +73,29 @@ class Tally:
         blank = np.full(shape, np.nan) if routed else np.zeros(shape)
         self.pans, self.targets, self.start_pans = blank.copy(), blank.copy(), blank.copy()
         self.best_pans, self.best_rewards = blank.copy(), np.full(shape, -np.inf)
-        self.visited: list[int] | None = [] if routed else None
+        self.routed, self.visited, self.position = routed, [], 0  # the positions of L visited
+        self.observations: list[Observation | None] = [None] * robots  # each robot's latest
         # sums over robots and iterations, and the robot-encodings they add up
         self.reward_sum, self.error_sums, self.encodings = 0.0, {}, 0
-        self.stat_sums: dict[str, float] = {}
-        self.updates = 0
+
+    def visit(self, p: int) -> None:
+        """A trial at position ``p`` of L begins."""
+        self.visited.append(p)
+        self.position = p
+
+    def seen(self, frames: Frames) -> None:
+        """A turn's frames, at the position of L visited now."""
+        self.observations[frames.robots] = frames.observations
+        out, p = frames.output, self.position
+        self.encoded(frames.observations, out, frames.pans, frames.rewards, p, frames.robots)
+
+    def so_far(self) -> Presentation:
+        """The record as it stands, for a route to choose where next."""
+        return self.presentation(keep_view=False)
 
     def encoded(
         self,
-        obs: list[dict],
+        obs: list[Observation],
         out: CoderOutput,
         pans: np.ndarray,
         rewards: np.ndarray,
@@ -97,7 +104,7 @@ class Tally:
     ) -> None:
         """The coder's output ``out`` (rewards in float64) for the images of ``robots`` (all by
         default) seen at ``pans``, at position ``p`` of L."""
-        iteration = int(obs[0]["iteration"])
+        iteration = obs[0].iteration
         self.reward_sum += float(out.reward.sum())
         for scale, e in out.errors.items():
             self.error_sums[scale] = self.error_sums.get(scale, 0.0) + float(e.sum())
@@ -118,35 +125,33 @@ class Tally:
         self.best_pans[robots, p] = best_pans
         if iteration == self.trial_length - 1:  # q_p, and α* there
             self.pans[robots, p] = pans
-            self.targets[robots, p] = [float(o["target_pan"]) for o in obs]
+            self.targets[robots, p] = [o.target_pan for o in obs]
 
-    def updated(self, stats: dict[str, float]) -> None:
-        for k, v in stats.items():
-            self.stat_sums[k] = self.stat_sums.get(k, 0.0) + float(v)
-        self.updates += 1
-
-    def presentation(self, obs: list[dict] | None, keep_view: bool) -> Presentation:
-        """The record, from the tally and the last observations (None: before the first; the
-        distances and textures are then unknown, NaN and −1)."""
+    def presentation(
+        self, keep_view: bool, policy_stats: dict[str, float] | None = None
+    ) -> Presentation:
+        """The record, from the tally and the last observations (before every robot's first,
+        the distances and textures are unknown, NaN and −1)."""
+        obs = self.observations if all(o is not None for o in self.observations) else []
         view = None
         if keep_view:
-            view = np.concatenate([obs[0]["reference"], obs[0]["image"]], axis=1)
-        updates, encodings = self.updates, max(self.encodings, 1)
+            view = np.concatenate([obs[0].reference, obs[0].image], axis=1)
+        encodings = max(self.encodings, 1)
         robots = self.pans.shape[0]
         return Presentation(
             lateral_positions=self.lateral,
             pans=self.pans,
             targets=self.targets,
             best_pans=self.pans if self.sweep is not None else self.best_pans,
-            distances=np.array([float(o["distance"]) for o in obs] if obs else [np.nan] * robots),
-            textures=np.array([int(o["texture_index"]) for o in obs] if obs else [-1] * robots),
+            distances=np.array([o.distance for o in obs] if obs else [np.nan] * robots),
+            textures=np.array([o.texture_index for o in obs] if obs else [-1] * robots),
             steps=self.encodings // robots,
             reward=self.reward_sum / encodings,
             errors={k: v / encodings for k, v in self.error_sums.items()},
-            policy_stats={k: v / updates for k, v in self.stat_sums.items()} if updates else {},
+            policy_stats=dict(policy_stats or {}),
             last_view=view,
             start_pans=self.start_pans,
-            route=None if self.visited is None else list(self.visited),
+            route=list(self.visited) if self.routed else None,
             motion=None if self.sweep is None else self.sweep.summary(),
         )
 
@@ -162,16 +167,16 @@ class _SweepTally:
         self.tracked = self.slips = 0
 
     def passed(
-        self, obs: list[dict], pans: np.ndarray, robots: slice, q: np.ndarray, targets: np.ndarray
+        self,
+        obs: list[Observation],
+        pans: np.ndarray,
+        robots: slice,
+        q: np.ndarray,
+        targets: np.ndarray,
     ) -> None:
         """The turn ``robots`` saw ``obs`` at ``pans``: fill q_p and α* (``q``, ``targets``, (B, r))
         at every l_p passed since its last iteration (at the first: every l_p ≤ x(0))."""
-        now = np.array(
-            [
-                [float(o["lateral_position"]), pan, float(o["target_pan"])]
-                for o, pan in zip(obs, pans)
-            ]
-        )
+        now = np.array([[o.lateral_position, pan, o.target_pan] for o, pan in zip(obs, pans)])
         before = self.last[robots]
         self.tracking_sum += float(np.abs(now[:, 2] - now[:, 1]).sum())
         self.tracked += len(now)

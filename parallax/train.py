@@ -369,7 +369,7 @@ def train(cfg: DictConfig) -> float:
 def _train(cfg: DictConfig, run_dir: Path, refuse, in_sweep: bool) -> float:
     from parallax import checkpoint
     from parallax.health import Diverged
-    from parallax.trainer import format_summary
+    from parallax.summary import format_summary
 
     # what the terminal gets, the run's train.log gets too (released by Hydra's job callback)
     transcript.keep(run_dir / f"{HydraConfig.get().job.name}.log", f"[{run_dir.name}] " * in_sweep)

@@ -1,7 +1,7 @@
 """Watching one robot through a presentation: what the video panel draws (paper §3.2, Fig. 3).
 
 A :class:`Watch` stands between :func:`parallax.loop.presentation` and its executor (the
-:class:`parallax.lockstep.Lockstep` or :class:`parallax.loop.InOrder`) and changes nothing the
+:class:`parallax.lockstep.Lockstep` or :class:`parallax.executor.InOrder`) and changes nothing the
 loop computes: each time robot 0's frames are handed to the loop, it notes the iteration's
 lateral position, pan α and target pan α*, and at some iterations it also keeps robot 0's
 left-eye image I(t) and a side camera's view of its world. :mod:`parallax.panel` draws those
@@ -23,6 +23,7 @@ import mujoco
 import numpy as np
 
 from parallax.config import READOUT_PANS
+from parallax.envs.observation import Observation
 from parallax.envs.walk import Walker
 from parallax.parts import Parts
 from parallax.presentation import Presentation
@@ -112,11 +113,18 @@ class Watch:
     def __exit__(self, *error: Any) -> None:
         self.run.__exit__(*error)
 
-    def reset(self) -> None:
-        self.run.reset()
+    @property
+    def trials(self) -> int:
+        return self.run.trials
 
-    def start_dictionary_step(self) -> None:
-        self.run.start_dictionary_step()
+    def start_route(self, lateral_m: float) -> None:
+        self.run.start_route(lateral_m)
+
+    def visit_next(self, lateral_m: float) -> None:
+        self.run.visit_next(lateral_m)
+
+    def reset(self, learn: bool) -> None:
+        self.run.reset(learn)
 
     def step(self, turn: int, pan_increments: Sequence[float]) -> None:
         self.run.step(turn, pan_increments)
@@ -132,27 +140,26 @@ class Watch:
     def physics(self) -> Any:
         return self.world.physics
 
-    def _note(self, obs: dict) -> None:
+    def _note(self, obs: Observation) -> None:
         task = self.world.task
         if self.reference is None:
-            self.reference = np.array(obs["reference"])
+            self.reference = np.array(obs.reference)
             lateral = task.lateral_positions
             middle = 0.5 * (lateral[0] + lateral[-1])
-            self.camera = side_camera(float(obs["distance"]), middle)
-        iteration = int(obs["iteration"])
+            self.camera = side_camera(obs.distance, middle)
         index = len(self.samples)
-        last = iteration == task.trial_length - 1
+        last = obs.iteration == task.trial_length - 1
         sample = Sample(
             index=index,
-            iteration=iteration,
-            lateral_m=float(obs["lateral_position"]),
-            pan_deg=float(obs["pan"]),
-            target_deg=float(obs["target_pan"]),
+            iteration=obs.iteration,
+            lateral_m=obs.lateral_position,
+            pan_deg=obs.pan,
+            target_deg=obs.target_pan,
             last_of_trial=last,
         )
         if index % self.every == 0 or last:
             sample.side = self.physics.render_view(self.camera, *self.side_size)
-            sample.eye = np.array(obs["image"])
+            sample.eye = np.array(obs.image)
         self.samples.append(sample)
         if self.on_sample is not None:
             self.on_sample(sample)

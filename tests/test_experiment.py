@@ -12,12 +12,14 @@ import torch
 
 from parallax import lockstep, loop
 from parallax.config import compose
+from parallax.executor import InOrder
 from parallax.experiment import Experiment
+from parallax.routes import Chosen
 
 
-def _in_order(exp: Experiment) -> loop.InOrder:
+def _in_order(exp: Experiment) -> InOrder:
     """The plain sequence on this thread, for ``exp``'s robots and turns."""
-    return loop.InOrder(exp.envs, exp.coder, exp.turns)
+    return InOrder(exp.envs, exp.coder, exp.turns)
 
 
 def _presentations(overrides: list[str], chunk: int, monkeypatch, count: int = 2):
@@ -93,7 +95,7 @@ def test_the_lockstep_gives_the_numbers_of_the_plain_loop(
     tiny_overrides, robots, extra, monkeypatch
 ) -> None:
     # the lockstep: GL thread, chunks of 2, the dictionary step on the helper thread during the
-    # policy's turn; the plain sequence (parallax.loop.InOrder): everything on this thread
+    # policy's turn; the plain sequence (parallax.executor.InOrder): everything on this thread
     monkeypatch.setattr(lockstep, "ENCODE_CHUNK", 2)
     cfg = compose(tiny_overrides + [f"env.robots={robots}", "env.initial_pan_jitter_deg=1", *extra])
     scheduled, plain = Experiment(cfg), Experiment(cfg)
@@ -120,11 +122,13 @@ def test_a_route_gives_the_numbers_of_the_plain_loop(tiny_overrides) -> None:
     cfg = compose(tiny_overrides + ["curriculum=multi_5_10"])
     scheduled, plain = Experiment(cfg), Experiment(cfg)
 
-    def route(visited, so_far):
+    def choose(visited, so_far):
         chosen = [len(so_far.lateral_positions) - 1, 0, None][len(visited)]
         if visited:  # the trial just ended is in the record, q_p of the position visited
             assert np.isfinite(so_far.pans[0, visited[-1]])
         return chosen
+
+    route = Chosen(choose)
 
     try:
         for _ in range(2):
@@ -277,7 +281,9 @@ def test_an_error_on_the_gl_thread_reaches_the_caller() -> None:
 
 class _TimeStep:
     def __init__(self, image: np.ndarray) -> None:
-        self.observation = {"image": image}
+        scalars = dict.fromkeys(("pan", "target_pan", "distance", "lateral_position"), 0.0)
+        indices = dict.fromkeys(("position_index", "iteration", "texture_index"), 0)
+        self.observation = {"reference": image, "image": image, **scalars, **indices}
 
     def last(self) -> bool:
         return False
@@ -312,10 +318,10 @@ def test_frames_are_encoded_in_chunks_on_the_cpu_and_in_one_call_on_a_gpu(device
         future.set_result(_TimeStep(np.zeros((8, 8, 3), dtype=np.uint8)))
         futures.append(future)
     coder = _RecordingCoder(device)
-    frames = lockstep.Lockstep([], coder, [])._encode_as_they_arrive(futures)
-    assert len(coder.calls) == calls
+    seen, encodings = lockstep.Lockstep([], coder, [])._encode_as_they_arrive(futures)
+    assert len(coder.calls) == calls == len(encodings)
     assert coder.calls[0][0] == 0 and coder.calls[-1][1] == robots
-    assert frames.output.state.shape == (robots, 2)
+    assert len(seen) == sum(e.output.state.shape[0] for e in encodings) == robots
 
 
 @pytest.mark.parametrize("learn_reset_step", [False, True])

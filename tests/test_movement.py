@@ -22,8 +22,8 @@ from parallax.distance.metrics import distance_error_by_range
 from parallax.distance.planner import MovementPlanner
 from parallax.experiment import Experiment
 from parallax.metrics import DistanceErrorTracker, finite_or_none, position_label
-from parallax.movement import planned_route
 from parallax.parts import seeds_for
+from parallax.routes import SWEEP, Chosen, planned_route
 from tests.conftest import TINY, train_tiny_run
 
 LATERAL = [0.05, 0.1, 0.15, 0.2]
@@ -251,10 +251,10 @@ def _scripted(order, calls=None):
             calls.append((list(visited), so_far.pans.copy()))
         return order[len(visited)] if len(visited) < len(order) else None
 
-    return route
+    return Chosen(route)
 
 
-def _frozen(exp, state, texture, distance, route=None):
+def _frozen(exp, state, texture, distance, route=SWEEP):
     exp.load_state_dict(copy.deepcopy(state))
     exp.envs[0].task.set_next_stimulus(texture_index=texture, distance=distance)
     return exp.run_presentation(learn=False, greedy=True, route=route)
@@ -322,7 +322,7 @@ def test_a_frozen_presentation_leaves_the_policy_as_it_was(learnt):
 def test_a_route_must_visit_a_position_and_none_twice(learnt):
     exp, state = learnt
     with pytest.raises(ValueError, match="at least one"):
-        _frozen(exp, state, 0, 5.0, lambda visited, so_far: None)
+        _frozen(exp, state, 0, 5.0, Chosen(lambda visited, so_far: None))
     with pytest.raises(ValueError, match="twice"):
         _frozen(exp, state, 0, 5.0, _scripted([2, 2]))
 

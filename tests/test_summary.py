@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from parallax.trainer import format_summary
+from parallax.summary import format_summary
 from tests.conftest import train_tiny_run
 
 

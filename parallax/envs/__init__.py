@@ -2,7 +2,8 @@
 
 ``parallax.envs.load(seed=..., lateral_positions=[...], ...)`` returns a dm_control
 ``control.Environment`` whose observations carry the reference image I0, the left-eye image I(t),
-the pan α and the target pan α* (see ``parallax.envs.task``). The robot, the camera and the
+the pan α and the target pan α* (see ``parallax.envs.task``; the loop reads them as an
+``Observation``). The robot, the camera and the
 target-pan solver live in ``hoap3``; textures in ``stimuli``; the fast eye renderer in
 ``rendering``, whose one GL thread (``gl_thread()``) makes every OpenGL call and can step the
 worlds while the caller computes.
@@ -17,6 +18,7 @@ default_to_egl()
 import_mujoco()  # first, so that a broken GL backend gives one clear error
 
 from parallax.envs.hoap3 import PAN_LIMIT_DEG, Physics, eye_fovy_deg  # noqa: E402
+from parallax.envs.observation import Observation  # noqa: E402
 from parallax.envs.rendering import gl_thread  # noqa: E402
 from parallax.envs.stimuli import StimulusSet, load_stimuli  # noqa: E402
 from parallax.envs.task import (  # noqa: E402
@@ -29,6 +31,7 @@ from parallax.envs.task import (  # noqa: E402
 
 __all__ = [
     "load",
+    "Observation",
     "Physics",
     "LateralPursuitTask",
     "PursuitEnvironment",

@@ -3,11 +3,13 @@
 ``NaturalActorCritic`` is the learner the trainer instantiates from ``conf/policy/nac.yaml``.
 ``features`` holds what it acts on: ``PolicyInputs`` builds the state from what the robots
 observe (θ, and beyond the paper θ_ref, the pans and the reward change) and ``FeatureNormalizer``
-the optional normalisations of θ.
+the optional normalisations of θ. ``Pursuer`` is its bookkeeping in the loop: each turn's last
+step, θ(I0, I0), the rule at a trial's reset, learning and acting.
 """
 
 from parallax.policy.features import FEATURE_NORMS, FeatureNormalizer, PolicyInputs
 from parallax.policy.natural_actor_critic import PAPER_ACTIONS_DEG, NaturalActorCritic
+from parallax.policy.pursuer import Pursuer
 
 __all__ = [
     "FEATURE_NORMS",
@@ -15,4 +17,5 @@ __all__ = [
     "FeatureNormalizer",
     "NaturalActorCritic",
     "PolicyInputs",
+    "Pursuer",
 ]

@@ -25,7 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -48,7 +48,7 @@ from parallax.distance_step import distance_step
 from parallax.envs.stimuli import SPLITS
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
-from parallax.movement import planned_route
+from parallax.routes import SWEEP, Route, planned_route
 from parallax.run_folder import RunLock, RunLocked, write_atomic
 from parallax.tools import plots
 from parallax.tools.console import footer, header, progress
@@ -69,7 +69,7 @@ def run_jobs(
     jobs: list[tuple[float, int]],
     greedy: bool,
     readout: str = "last",
-    route: Callable | None = None,
+    route: Route = SWEEP,
     bar: Any = None,
 ) -> dict[str, np.ndarray]:
     """Run one frozen presentation per (distance, texture) job, B robots at a time (with

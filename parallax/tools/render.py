@@ -49,6 +49,7 @@ def render_pictures(
 ) -> dict[str, np.ndarray]:
     """The side view and the left-eye strip as RGB arrays (nothing written)."""
     import parallax.envs
+    from parallax.envs import Observation
 
     if not math.isfinite(lateral_m):
         raise ValueError(f"--lateral must be a finite number of metres, got {lateral_m!r}")
@@ -63,7 +64,7 @@ def render_pictures(
     try:
         if texture_index is not None:
             env.task.set_next_stimulus(texture_index=texture_index)
-        first = env.reset().observation
+        first = Observation.of(env.reset().observation)
         physics = env.physics
         target = physics.target_pan_deg()
         physics.set_pan_deg(target)
@@ -72,17 +73,17 @@ def render_pictures(
         disparity = disparity_score(lateral_m, distance_m)
         eye = np.concatenate(
             [
-                _label(first["reference"], "I0 (reference): l = 0, pan 0"),
-                np.full((first["image"].shape[0] + 22, 6, 3), 255, np.uint8),
-                _label(first["image"], f"l = {lateral_m * 100:g} cm, pan 0 ({disparity:.1f} px)"),
-                np.full((first["image"].shape[0] + 22, 6, 3), 255, np.uint8),
+                _label(first.reference, "I0 (reference): l = 0, pan 0"),
+                np.full((first.image.shape[0] + 22, 6, 3), 255, np.uint8),
+                _label(first.image, f"l = {lateral_m * 100:g} cm, pan 0 ({disparity:.1f} px)"),
+                np.full((first.image.shape[0] + 22, 6, 3), 255, np.uint8),
                 _label(fixating, f"l = {lateral_m * 100:g} cm, pan = target {target:.3f} deg"),
             ],
             axis=1,
         )
         caption = (
             f"d = {distance_m:g} m, l = {lateral_m * 100:g} cm, texture "
-            f"{int(first['texture_index'])}: {physics.stimuli.names[int(first['texture_index'])]}"
+            f"{first.texture_index}: {physics.stimuli.names[first.texture_index]}"
         )
         return {"scene_side.png": _label(side, caption), "scene_left_eye.png": eye}
     finally:

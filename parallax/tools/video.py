@@ -30,8 +30,8 @@ from parallax import checkpoint
 from parallax.config import READOUT_PANS, distance_readout, load_run_config
 from parallax.distance_step import distance_step
 from parallax.envs.stimuli import SPLITS
-from parallax.movement import planned_route
 from parallax.panel import PANEL_COLOURS, Watched, frame_size, panel_frames, watched
+from parallax.routes import SWEEP, planned_route
 from parallax.tools.evaluate import frozen_experiment, read_checkpoint
 from parallax.watch import Watch
 from parallax.writable import file_problem
@@ -101,7 +101,7 @@ def watched_presentations(
         name = exp.envs[0].physics.stimuli.names[texture_index]
         readout = distance_readout(cfg)
         planner = exp.planner if exp.planner is not None and exp.planner.is_ready else None
-        route = None if planner is None else planned_route(planner, READOUT_PANS[readout])
+        route = SWEEP if planner is None else planned_route(planner, READOUT_PANS[readout])
         truths = distance_step(exp.parts).truths
         say(
             f"[parallax-render] {run_dir}/{checkpoint_name} (presentation "

@@ -83,7 +83,7 @@ def test_q_p_is_read_between_the_iterations_either_side_of_l_p():
     for iteration, (x, pan, target) in enumerate(
         [(0.0, 0.0, 0.0), (0.04, 0.5, 0.6), (0.1, 1.1, 1.2)]
     ):
-        obs = [{"iteration": iteration, "lateral_position": x, "target_pan": target}]
+        obs = [SimpleNamespace(iteration=iteration, lateral_position=x, target_pan=target)]
         tally.encoded(obs, out, np.array([pan]), np.zeros(1), 0)
     # l = 0.05 lies 1/6 of the way from 0.04 to 0.1; l = 0.1 is the last iteration's
     np.testing.assert_allclose(tally.pans, [[0.5 + 0.6 / 6, 1.1]])

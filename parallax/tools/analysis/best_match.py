@@ -43,7 +43,7 @@ def views_around_target(env, texture: int, distance: float, lateral: float, offs
     frames): the left eye's image at each pan α* + offset (degrees). Shared with
     parallax.tools.analysis.landscape."""
     env.task.set_next_stimulus(texture_index=texture, distance=distance)
-    reference = env.reset().observation["reference"]
+    reference = parallax.envs.Observation.of(env.reset().observation).reference
     physics = env.physics
     physics.set_lateral_position(lateral)
     target = physics.target_pan_deg()

@@ -1,58 +1,37 @@
-"""Where the robot goes in a presentation: the paper's sweep of L, or a planned route (§7).
+"""A robot that plans its route (beyond the paper, its first future work, §7).
 
-The trainer asks its movement, before each presentation, for the route the loop follows
-(:meth:`Sweep.route`: None, every position of L in order) and, after it, for what the route
-learnt and what it cost (:meth:`Sweep.after`). :class:`Planned` is the first future work of §7:
-a robot that has learnt enough stops sweeping and asks :class:`parallax.distance.planner.
-MovementPlanner` where to look next, sweeping L still with probability ``movement.explore`` so
-that the planner's queue keeps learning.
+:class:`Planned` is the run's movement with ``movement.route=planned``: once it has learnt enough
+(the planner's queue is full), a presentation stops sweeping L and asks
+:class:`parallax.distance.planner.MovementPlanner` where to look next and when to stop
+(:func:`planned_route`); with probability ``movement.explore`` it sweeps L still, so that the
+planner's queue keeps learning from full sweeps.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from omegaconf import DictConfig
 
-from parallax.config import READOUT_PANS, distance_readout
 from parallax.distance.planner import MovementPlanner
-from parallax.loop import Route
 from parallax.metrics import DistanceErrorTracker
-from parallax.parts import Parts
 from parallax.presentation import Presentation
 from parallax.record import Route as RouteRecord
+from parallax.routes.chosen import Chosen
+from parallax.routes.route import Route
+from parallax.routes.sweep import SWEEP
 
 
-def planned_route(planner: MovementPlanner, readout_key: str) -> Route:
-    """The planner as the loop's route, reading s as ``readout_key`` (the Presentation field of
+def planned_route(planner: MovementPlanner, readout_key: str) -> Chosen:
+    """The planner's route, reading s as ``readout_key`` (the Presentation field of
     train.distance_readout)."""
 
     def choose(visited: list[int], so_far: Presentation) -> int | None:
         pans = getattr(so_far, readout_key)[0]
         return planner.next_position(visited, pans[visited])
 
-    return choose
+    return Chosen(choose)
 
 
-class Sweep:
-    """The paper's movement: every presentation sweeps all of L."""
-
-    def route(self) -> Route | None:
-        return None
-
-    def after(self, pres: Presentation, learnt_distance: bool) -> RouteRecord | None:
-        return None
-
-    def summary(self) -> dict:
-        return {}
-
-    def state_dict(self) -> dict:
-        return {}
-
-    def load_state_dict(self, state: dict) -> None:
-        pass
-
-
-class Planned(Sweep):
+class Planned:
     """A planned route once the planner's queue is full, else (and with probability ``explore``)
     a sweep, whose vectors the planner's queue learns; its routes' estimates are scored online
     apart from the sweeps' network."""
@@ -69,10 +48,10 @@ class Planned(Sweep):
         self.readout_key = readout_key
         self.errors = DistanceErrorTracker(window=window)
 
-    def route(self) -> Route | None:
+    def route(self) -> Route:
         draw = self.explore_random.random_sample()  # drawn every time, ready or not
         if not self.planner.is_ready or draw < self.explore:
-            return None
+            return SWEEP
         return planned_route(self.planner, self.readout_key)
 
     def after(self, pres: Presentation, learnt_distance: bool) -> RouteRecord:
@@ -101,12 +80,3 @@ class Planned(Sweep):
 
     def load_state_dict(self, state: dict) -> None:
         self.errors.load_state_dict(state["route_dist"])
-
-
-def movement(cfg: DictConfig, parts: Parts) -> Sweep:
-    """The run's movement: a sweep of L, or planned routes with movement.route=planned."""
-    if parts.planner is None:
-        return Sweep()
-    readout_key = READOUT_PANS[distance_readout(cfg)]
-    window = int(cfg.metrics.distance_window)
-    return Planned(parts.planner, parts.explore, float(cfg.movement.explore), readout_key, window)
