@@ -32,15 +32,15 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator, Sequence
-from concurrent.futures import Future, wait
-from contextlib import contextmanager
+from concurrent.futures import Future
+from contextlib import contextmanager, suppress
 from typing import Any, NamedTuple
 
 import numpy as np
 import torch
 
 import parallax.envs
-from parallax.coding import CoderOutput, Encoding, MultiScaleCoder
+from parallax.coding import CoderOutput, DictionarySteps, Encoding, MultiScaleCoder
 
 #: Robots whose frames are encoded in one call on the CPU (the last chunk may be smaller): a small
 #: chunk starts encoding sooner after the first frames arrive, a large one makes fewer calls.
@@ -94,7 +94,8 @@ class Lockstep:
         self._futures: list[list[Future]] = [[] for _ in self.turns]  # each turn's next frames
         # this iteration's encodings so far, chunk by chunk, for its dictionary step
         self._encodings: list[Encoding] = []
-        self._learning: Future | None = None  # a dictionary step running on the helper thread
+        # a dictionary step running on the helper thread
+        self._learning: Future | DictionarySteps | None = None
         #: the calling thread's seconds in each of :data:`WAITS` so far
         self.seconds = dict.fromkeys(WAITS, 0.0)
 
@@ -105,7 +106,10 @@ class Lockstep:
         if error is None:
             self.finish_dictionary_step()
         elif self._learning is not None:
-            wait([self._learning])  # it reads and writes the dictionaries: never leave it running
+            # it reads and writes the dictionaries: never leave it running; the error that
+            # leaves the block is the one to raise
+            with suppress(Exception):
+                self._learning.result()
 
     def reset(self) -> None:
         """Every world draws its stimulus and the coder caches every I0; :meth:`frames` then
