@@ -97,12 +97,8 @@ class ScaleCoder(nn.Module):
 
     def _dictionary_key(self) -> tuple:
         """Changes whenever the dictionary does (in place or replaced)."""
-        return (
-            self.dictionary.data_ptr(),
-            self.dictionary._version,
-            self.dictionary.device,
-            self.dictionary.dtype,
-        )
+        dictionary = self._buffers["dictionary"]  # once: a module's buffer lookup is slow
+        return (dictionary.data_ptr(), dictionary._version, dictionary.device, dictionary.dtype)
 
     @torch.no_grad()
     def set_reference(self, gray: torch.Tensor) -> None:
