@@ -32,14 +32,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator, Sequence
-from concurrent.futures import Future, wait
-from contextlib import contextmanager
+from concurrent.futures import Future
+from contextlib import contextmanager, suppress
 from typing import Any
 
 import torch
 
 import parallax.envs
-from parallax.coding import Encoding, MultiScaleCoder
+from parallax.coding import DictionarySteps, Encoding, MultiScaleCoder
 from parallax.envs.observation import Observation
 from parallax.executor import Executor, stack
 
@@ -78,7 +78,8 @@ class Lockstep(Executor):
         super().__init__(envs, coder, turns)
         self._world = parallax.envs.gl_thread()
         self._futures: list[list[Future]] = [[] for _ in self.turns]  # each turn's next frames
-        self._learning: Future | None = None  # a dictionary step running on the helper thread
+        # a dictionary step running on the helper thread
+        self._learning: Future | DictionarySteps | None = None
         #: the calling thread's seconds in each of :data:`WAITS` so far
         self.seconds = dict.fromkeys(WAITS, 0.0)
 
@@ -86,7 +87,10 @@ class Lockstep(Executor):
         if error is None:
             super().__exit__(kind, error, traceback)
         elif self._learning is not None:
-            wait([self._learning])  # it reads and writes the dictionaries: never leave it running
+            # it reads and writes the dictionaries: never leave it running; the error that
+            # leaves the block is the one to raise
+            with suppress(Exception):
+                self._learning.result()
 
     def _reset_worlds(self) -> list[Observation]:
         """Every world resets on the GL thread; :meth:`frames` then encodes the first frames,

@@ -192,17 +192,23 @@ def test_an_error_during_the_step_waits_for_the_dictionary_step(
     exp = Experiment(compose(tiny_overrides))
     try:
         steps = []
-        slow_learn = exp.coder.learn_from
+        start_learning = exp.coder.learn_from_async
 
-        def learn_slowly(encodings) -> None:
-            threading.Event().wait(0.2)
-            slow_learn(encodings)
-            steps.append("learnt")
+        class SlowSteps:
+            """The dictionary step, finishing 0.2 s late."""
+
+            def __init__(self, encodings) -> None:
+                self.running = start_learning(encodings)
+
+            def result(self) -> None:
+                threading.Event().wait(0.2)
+                self.running.result()
+                steps.append("learnt")
 
         def failing_act(*_args, **_kwargs):
             raise RuntimeError("policy failed")
 
-        monkeypatch.setattr(exp.coder, "learn_from", learn_slowly)
+        monkeypatch.setattr(exp.coder, "learn_from_async", SlowSteps)
         monkeypatch.setattr(exp.policy, "act", failing_act)
         with pytest.raises(RuntimeError, match="policy failed"):
             exp.run_presentation()

@@ -6,7 +6,7 @@ its parts, exported for tests, notebooks and the benchmark (``parallax.tools.ben
 
 from . import native, native_check
 from .atoms import atom_grid, save_png
-from .coder import CoderOutput, Encoding, MultiScaleCoder, scale_seed
+from .coder import CoderOutput, DictionarySteps, Encoding, MultiScaleCoder, scale_seed
 from .dictionary import gradient_step_, pooled_activity, random_dictionary, reconstruction_error
 from .pursuit import SparseCode, gram_matrix, matching_pursuit, matching_pursuit_recompute
 from .retina import ScaleSpec, as_gray_batch, scale_patches, stack_pair, zero_mean_unit_norm
@@ -18,6 +18,7 @@ native.set_self_check(native_check.self_check)
 
 __all__ = [
     "CoderOutput",
+    "DictionarySteps",
     "Encoding",
     "MultiScaleCoder",
     "ScaleCoder",

@@ -25,10 +25,19 @@ from torch import nn
 
 from parallax.config.schema import CoderConfig, default
 
+from . import native
 from .atoms import atom_grid
+from .dictionary import MIN_ATOM_NORM, exact_pooled_activity_kernel
 from .pursuit import SparseCode
-from .retina import ScaleSpec, as_gray_batch
-from .scale import ScaleCoder
+from .retina import (
+    NEAR_CONSTANT_TOLERANCE,
+    ScaleSpec,
+    as_gray_batch,
+    centre_window,
+    prepare_reference,
+    pyramid_down,
+)
+from .scale import KERNELS, ScaleCoder
 
 
 @dataclass
@@ -67,8 +76,10 @@ _helper_pid: int | None = None
 
 
 def _scale_helper() -> ThreadPoolExecutor:
-    """The coder's helper thread, one per process, started on first use: it encodes the second
-    scale while the caller encodes the first, and takes the dictionary step of a lockstep."""
+    """The coder's helper thread where the compiled kernels do not take every scale (they have a
+    helper thread of their own, :meth:`MultiScaleCoder._encode_compiled`), one per process,
+    started on first use: it encodes the second scale while the caller encodes the first, and
+    takes the dictionary step of a lockstep."""
     global _helper, _helper_pid
     if _helper is None or _helper_pid != os.getpid():
         _helper, _helper_pid = (
@@ -90,6 +101,22 @@ def _on_helper(work: Callable[..., Any], *arguments: Any) -> Future:
         return work(*arguments)
 
     return _scale_helper().submit(run)
+
+
+class DictionarySteps:
+    """The dictionary steps of every scale, running on the compiled kernels' helper thread
+    (:meth:`MultiScaleCoder.learn_from_async`); :meth:`result` waits for them, raises their
+    error if any, and hands each scale its next Gram matrix."""
+
+    def __init__(self, pending: Any, coders: Sequence[ScaleCoder]) -> None:
+        self._pending, self._coders, self._settled = pending, list(coders), False
+
+    def result(self) -> None:
+        if self._settled:
+            return
+        self._settled = True
+        for coder, gram in zip(self._coders, self._pending.wait(), strict=True):
+            coder._gram, coder._gram_key = gram, coder._dictionary_key()
 
 
 def scale_seed(seed: int, scale: str) -> int:
@@ -149,6 +176,8 @@ class MultiScaleCoder(nn.Module):
         self.normalisation = normalisation
         self.pairing = str(pairing)
         self.coders = nn.ModuleDict(coders)
+        self._compiled_key: tuple | None = None
+        self._compiled: Any = None
 
     @property
     def state_dim(self) -> int:
@@ -181,6 +210,9 @@ class MultiScaleCoder(nn.Module):
         all the chunks at once: the outputs and the dictionary step are those of one call.
         """
         gray = as_gray_batch(images, self.device)
+        compiled = self._compiled_scales()
+        if compiled is not None:
+            return self._encode_compiled(compiled, gray, robots, next_reference)
         encoded = self._each_scale(
             lambda name: self.coders[name].encode_images(gray, robots, next_reference)
         )
@@ -190,6 +222,77 @@ class MultiScaleCoder(nn.Module):
         return Encoding(
             output=CoderOutput(state=state, reward=reward, errors=errors),
             codes={name: code for name, (_, code) in encoded.items()},
+        )
+
+    def _compiled_scales(self) -> Any:
+        """The compiled kernels' module where every scale's encoding and dictionary step run
+        there, all scales in one call (:meth:`_encode_compiled`, :meth:`learn_from_async`); else
+        None, and each scale runs its own code. Decided once per kernel choice, torch thread
+        count and dtype: θ comes from the picks only where that gives torch's θ exactly."""
+        first = self.coders[self.scales[0]].dictionary
+        key = (native.kernel_choice(), torch.get_num_threads(), first.dtype, first.device)
+        if key != self._compiled_key:
+            self._compiled_key, self._compiled = key, self._find_compiled()
+        return self._compiled
+
+    def _find_compiled(self) -> Any:
+        coders = [self.coders[name] for name in self.scales]
+        if any(coder.pursuit not in ("gram", "gram_cpp") for coder in coders):
+            return None
+        first = coders[0].dictionary
+        modules = {native.kernels_for(KERNELS[coder.pursuit], first) for coder in coders}
+        if len(modules) != 1 or None in modules:
+            return None
+        for coder in coders:
+            dictionary = coder.dictionary
+            if (
+                dictionary.dtype != first.dtype
+                or not dictionary.is_contiguous()
+                or not exact_pooled_activity_kernel(
+                    coder.spec.patch_count,
+                    coder.atoms,
+                    coder.sparsity,
+                    dictionary.dtype,
+                    KERNELS[coder.pursuit],
+                )
+            ):
+                return None
+        return modules.pop()
+
+    def _encode_compiled(
+        self, compiled: Any, gray: torch.Tensor, robots: slice, next_reference: bool
+    ) -> Encoding:
+        """:meth:`encode` in one compiled call, the same numbers: the first scale on this thread
+        and the others on the kernels' helper thread, neither holding the GIL."""
+        coders = [self.coders[name] for name in self.scales]
+        references = [coder.references_of(robots, gray.shape[0]) for coder in coders]
+        state, reward, encoded = compiled.encode_scales(
+            references,
+            [
+                pyramid_down(centre_window(gray, c.spec.window), c.spec.pyramid_levels)
+                for c in coders
+            ],
+            [coder.spec.patch for coder in coders],
+            [coder.spec.stride for coder in coders],
+            [coder.dictionary for coder in coders],
+            [coder.gram() for coder in coders],
+            coders[0].sparsity,
+            self.normalisation == "per_half",
+            NEAR_CONSTANT_TOLERANCE,
+        )
+        if next_reference:
+            for coder, scale in zip(coders, encoded):
+                coder.reference[robots] = prepare_reference(scale[5], self.normalisation)
+        return Encoding(
+            output=CoderOutput(
+                state=state,
+                reward=reward,
+                errors={name: scale[4] for name, scale in zip(self.scales, encoded)},
+            ),
+            codes={
+                name: SparseCode(scale[0], scale[1], None, scale[2])
+                for name, scale in zip(self.scales, encoded)
+            },
         )
 
     def encode_frame(self, images: Any, robots: slice = slice(None)) -> Encoding:
@@ -211,8 +314,11 @@ class MultiScaleCoder(nn.Module):
         for name in self.scales:
             self.coders[name].learn_from([chunk.codes[name] for chunk in chunks])
 
-    def learn_from_async(self, encodings: Encoding | Sequence[Encoding]) -> Future:
-        """:meth:`learn_from` on the helper thread (CPU; elsewhere at once), as a future.
+    def learn_from_async(
+        self, encodings: Encoding | Sequence[Encoding]
+    ) -> Future | DictionarySteps:
+        """:meth:`learn_from` on the helper thread (CPU; elsewhere at once); its ``result()``
+        waits for it and raises its error, if any.
 
         The caller must wait for it before it encodes again or reads the dictionaries. In a
         lockstep it runs while the policy learns and acts, when no other thread works: the
@@ -222,7 +328,32 @@ class MultiScaleCoder(nn.Module):
             self.learn_from(encodings)
             done.set_result(None)
             return done
-        return _on_helper(self.learn_from, encodings)
+        compiled = self._compiled_scales()
+        steps = None if compiled is None else self._step_sizes(encodings)
+        if steps is None:
+            return _on_helper(self.learn_from, encodings)
+        chunks = [encodings] if isinstance(encodings, Encoding) else list(encodings)
+        codes = {name: [chunk.codes[name] for chunk in chunks] for name in self.scales}
+        coders = [self.coders[name] for name in self.scales]
+        pending = compiled.start_dictionary_steps(
+            [coder.dictionary for coder in coders],
+            [[code.atom_indices for code in codes[name]] for name in self.scales],
+            [[code.coefficients for code in codes[name]] for name in self.scales],
+            [[code.residuals for code in codes[name]] for name in self.scales],
+            steps,
+            MIN_ATOM_NORM,
+        )
+        return DictionarySteps(pending, coders)
+
+    def _step_sizes(self, encodings: Encoding | Sequence[Encoding]) -> list[float] | None:
+        """Each scale's dictionary step size for these encodings (ScaleCoder.learn_from's);
+        None where a scale has no patches to learn from."""
+        chunks = [encodings] if isinstance(encodings, Encoding) else list(encodings)
+        steps = [
+            self.coders[name].step_size([chunk.codes[name] for chunk in chunks])
+            for name in self.scales
+        ]
+        return None if None in steps else steps
 
     def _each_scale(self, work: Callable[[str], Any]) -> dict[str, Any]:
         """``work(scale)`` for every scale, the first on this thread and the others on a helper

@@ -86,14 +86,14 @@ def gradient_step_(
     come from that many images of equal size, and each image's step is η·Bᵀ·R/P of its own P
     patches (B robots' experience counts B times; the atoms are renormalised once, after the
     sum)."""
-    chunks, step = _chunks_and_step(code, learning_rate, images)
+    chunks, step = chunks_and_step(code, learning_rate, images)
     if step is None:
         return
     dictionary.add_(codes_times_residuals(chunks, dictionary.shape[0], kernel), alpha=step)
     normalise_atoms_(dictionary)
 
 
-def _chunks_and_step(
+def chunks_and_step(
     code: SparseCode | Sequence[SparseCode], learning_rate: float, images: int
 ) -> tuple[list[SparseCode], float | None]:
     """The code as its list of chunks, and the step size η·images/P over their P patches
@@ -115,7 +115,7 @@ def gradient_step_and_gram_(
     thread that runs meanwhile (the policy's, in a lockstep) never waits for it. None, with
     nothing done, where the kernels do not apply (another device, ``kernel`` "torch", no
     patches)."""
-    chunks, step = _chunks_and_step(code, learning_rate, images)
+    chunks, step = chunks_and_step(code, learning_rate, images)
     compiled = native.kernels_for(kernel, dictionary)
     if compiled is None or step is None or not dictionary.is_contiguous():
         return None

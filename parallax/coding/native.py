@@ -1,12 +1,16 @@
 """The compiled CPU kernels of the sparse coder (``pursuit_kernel.cpp``, paper §3.3, eq. 1).
 
-Seven functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch by patch),
+Nine functions: ``gram_pursuit`` (the k Gram-form matching-pursuit steps, patch by patch),
 ``codes_and_residuals`` (dense codes and residuals from the picks), ``residuals_only``,
 ``pooled_activity`` (θ from the picks, summed in torch's order, without the dense codes; checked
 per shape by :func:`parallax.coding.dictionary.exact_pooled_activity_kernel`),
 ``codes_times_residuals`` (the dictionary gradient's Bᵀ·R), ``dictionary_step`` (the whole
-dictionary step and the next Gram matrix in one call, which keeps the GIL released throughout)
-and ``encode_pairs`` (one scale's whole encoding in one call, likewise).
+dictionary step and the next Gram matrix in one call, which keeps the GIL released throughout),
+``encode_pairs`` (one scale's whole encoding in one call, likewise), ``encode_scales`` (every
+scale's encoding from its pyramid images in one call, the first scale on the caller's thread and
+the others on the module's own helper thread, which never runs Python) and
+``start_dictionary_steps`` (every scale's dictionary step handed to that thread; its ``wait()``
+gives the Gram matrices).
 :func:`load_kernels` builds the C++ file on first use with ``torch.utils.cpp_extension.load``
 (-O3; needs a C++ compiler and the ``ninja`` package; torch caches the build under
 ``~/.cache/torch_extensions`` or ``$TORCH_EXTENSIONS_DIR``, so later processes only load it),

@@ -18,7 +18,7 @@ import torch
 from . import reference
 from .dictionary import MIN_ATOM_NORM, gradient_step_, reconstruction_error
 from .pursuit import SparseCode, gram_matrix
-from .retina import NEAR_CONSTANT_TOLERANCE, prepare_reference, stack_pair
+from .retina import NEAR_CONSTANT_TOLERANCE, extract_patches, prepare_reference, stack_pair
 
 
 def self_check(module: ModuleType) -> None:
@@ -56,6 +56,7 @@ def self_check(module: ModuleType) -> None:
                 ),
                 *_dictionary_step_pairs(module, dictionary, picks, coefficients, codes, residuals),
                 *_encode_pairs_pairs(module, dictionary, gram, generator),
+                *_helper_thread_pairs(module, atoms, dtype, generator),
             ):
                 if not torch.equal(mine, theirs):
                     raise RuntimeError(
@@ -103,3 +104,49 @@ def _encode_pairs_pairs(module, dictionary, gram, generator) -> list:
             for name, mine, theirs in zip(names, got, expected)
         ]
     return pairs_checked
+
+
+def _helper_thread_pairs(module, atoms: int, dtype: torch.dtype, generator) -> list:
+    """(name, the kernel's, the separate calls') for two scales encoded in one call (the second
+    on the kernels' helper thread) and their dictionary steps handed to that thread."""
+    dictionaries = [torch.randn(atoms, 8, generator=generator, dtype=dtype) for _ in range(2)]
+    for dictionary in dictionaries:
+        dictionary /= dictionary.norm(dim=1, keepdim=True)
+    grams = [dictionary @ dictionary.T for dictionary in dictionaries]
+    images = [torch.rand(2, 5, 5, generator=generator, dtype=dtype) for _ in range(2)]
+    strides = [1, 3]
+    raws = [extract_patches(image, 2, stride) for image, stride in zip(images, strides)]
+    references = [prepare_reference(torch.rand_like(raw), "per_half") for raw in raws]
+    expected = [
+        module.encode_pairs(reference, raw, dictionary, gram, 3, True, NEAR_CONSTANT_TOLERANCE)
+        for reference, raw, dictionary, gram in zip(references, raws, dictionaries, grams)
+    ]
+    state, reward, encoded = module.encode_scales(
+        references, images, [2, 2], strides, dictionaries, grams, 3, True, NEAR_CONSTANT_TOLERANCE
+    )
+    checked = [
+        ("one-call state", state, torch.cat([scale[3] for scale in expected], dim=1)),
+        ("one-call reward", reward, -torch.stack([scale[4] for scale in expected]).sum(dim=0)),
+    ]
+    for s, (got, theirs) in enumerate(zip(encoded, expected)):
+        checked += [(f"scale {s}'s one-call encoding", a, b) for a, b in zip(got, theirs)]
+        checked.append((f"scale {s}'s raw patches", got[5], raws[s]))
+    stepped = [dictionary.clone() for dictionary in dictionaries]
+    gram_steps = module.start_dictionary_steps(
+        stepped,
+        [[scale[0]] for scale in expected],
+        [[scale[1]] for scale in expected],
+        [[scale[2]] for scale in expected],
+        [0.1, 0.2],
+        MIN_ATOM_NORM,
+    ).wait()
+    for s, (scale, alpha) in enumerate(zip(expected, (0.1, 0.2))):
+        alone = dictionaries[s].clone()
+        gram = module.dictionary_step(
+            alone, [scale[0]], [scale[1]], [scale[2]], alpha, MIN_ATOM_NORM
+        )
+        checked += [
+            (f"scale {s}'s dictionary step on the helper", stepped[s], alone),
+            (f"scale {s}'s Gram matrix from the helper", gram_steps[s], gram),
+        ]
+    return checked

@@ -28,17 +28,24 @@
 // (reference.py's codes_and_residuals and codes_times_residuals) and add up in the same order
 // with the same rounding, so they too are bit-identical. native.py checks every function against
 // the numpy/torch code once before the coder uses them.
+//
+// The coder's helper thread lives here too (a thread of this module's own that never runs
+// Python): encode_scales encodes the first scale on the caller's thread while it encodes the
+// others, and start_dictionary_steps hands it the dictionary steps of every scale, which the
+// caller collects later; neither the hand-offs nor the helper's work take the GIL.
 
 // The few ATen headers it needs rather than <torch/extension.h>, which would make every build
 // compile most of torch's headers.
 #include <ATen/Dispatch.h>
 #include <ATen/Parallel.h>
 #include <ATen/core/Tensor.h>
+#include <ATen/core/grad_mode.h>
 #include <ATen/ops/cat.h>
 #include <ATen/ops/empty.h>
 #include <ATen/ops/linalg_vector_norm.h>
 #include <ATen/ops/matmul.h>
 #include <ATen/ops/ones_like.h>
+#include <ATen/ops/stack.h>
 #include <ATen/ops/where.h>
 #include <ATen/ops/zeros.h>
 #include <ATen/ops/zeros_like.h>
@@ -48,11 +55,23 @@
 #include <immintrin.h>
 #endif
 
+#include <pthread.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdint>
 #include <cstring>
+#include <deque>
+#include <functional>
+#include <future>
 #include <limits>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <tuple>
 #include <type_traits>
 #include <vector>
 
@@ -526,6 +545,183 @@ std::vector<at::Tensor> encode_pairs(const at::Tensor& reference, const at::Tens
   return {pursuit[0], pursuit[1], residuals, activity, error};
 }
 
+
+// One scale's encoding of B images from their pyramid images (B, h, w): the raw patches of
+// parallax.coding.retina.extract_patches (the same unfold and reshape), then encode_pairs.
+// Returns encode_pairs' five tensors and the raw patches (the next references of the
+// consecutive pairing).
+std::vector<at::Tensor> encode_scale(const at::Tensor& reference, const at::Tensor& image,
+                                     int64_t patch, int64_t stride, const at::Tensor& dictionary,
+                                     const at::Tensor& gram, int64_t sparsity, bool per_half,
+                                     double tolerance) {
+  TORCH_CHECK(image.dim() == 3, "pyramid images must be (B, h, w)");
+  const at::Tensor raw = image.unfold(1, patch, stride)
+                             .unfold(2, patch, stride)
+                             .reshape({image.size(0), -1, patch * patch});
+  std::vector<at::Tensor> encoded =
+      encode_pairs(reference, raw, dictionary, gram, sparsity, per_half, tolerance);
+  encoded.push_back(raw);
+  return encoded;
+}
+
+// The helper thread: jobs run one at a time, in the order they were handed over. A forked child
+// starts its own (a thread does not survive fork); the parent's object is left alone there.
+class HelperThread {
+ public:
+  HelperThread() : pid_(getpid()) {
+    std::thread([this] { serve(); }).detach();   // it serves until the process ends
+  }
+  pid_t pid() const { return pid_; }
+  void post(std::function<void()> job) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      jobs_.push_back(std::move(job));
+    }
+    ready_.notify_one();
+  }
+
+ private:
+  void serve() {
+    // The name parallax-bench's CPU split looks for (parallax.tools.bench.timing).
+    pthread_setname_np(pthread_self(), "parallax-scale");
+    for (;;) {
+      std::function<void()> job;
+      {
+        std::unique_lock<std::mutex> lock(mutex_);
+        ready_.wait(lock, [this] { return !jobs_.empty(); });
+        job = std::move(jobs_.front());
+        jobs_.pop_front();
+      }
+      job();
+    }
+  }
+  const pid_t pid_;
+  std::mutex mutex_;
+  std::condition_variable ready_;
+  std::deque<std::function<void()>> jobs_;
+};
+
+HelperThread& helper_thread() {
+  static std::mutex creating;
+  static HelperThread* helper = nullptr;   // never freed: its thread may outlive any owner
+  std::lock_guard<std::mutex> lock(creating);
+  if (helper == nullptr || helper->pid() != getpid()) helper = new HelperThread();
+  return *helper;
+}
+
+using Tensors = std::vector<at::Tensor>;
+
+// work() on the helper thread, with the caller's intra-op thread count (per thread under OpenMP
+// and MKL: with the caller's, the helper's products and reductions add up as the caller's would)
+// and without autograd; its result or its exception through the future. The job drops its
+// inputs before it hands the result over, so that the caller drops the last reference to a
+// tensor that Python owns (torch.from_numpy's), on its own thread.
+std::shared_future<Tensors> on_helper(std::function<Tensors()> work) {
+  const int threads = at::get_num_threads();
+  auto promise = std::make_shared<std::promise<Tensors>>();
+  std::shared_future<Tensors> result = promise->get_future().share();
+  helper_thread().post([threads, promise, work = std::move(work)]() mutable {
+    try {
+      if (at::get_num_threads() != threads) at::set_num_threads(threads);
+      at::NoGradGuard no_grad;
+      Tensors value = work();
+      work = nullptr;
+      promise->set_value(std::move(value));
+    } catch (...) {
+      work = nullptr;
+      promise->set_exception(std::current_exception());
+    }
+  });
+  return result;
+}
+
+// Every scale's encoding of the same B images in one call: the first scale on this thread, the
+// others on the helper thread at the same time (the scales share nothing). Per scale its cached
+// I0 patches, its pyramid images, patch side and stride, dictionary and Gram matrix. Returns the
+// state θ = [θ¹; θ²; …] (B, N·S), the reward −Σ_j e^j (B,) and each scale's encode_scale
+// tensors, as parallax.coding.MultiScaleCoder.encode computes them from separate calls.
+std::tuple<at::Tensor, at::Tensor, std::vector<Tensors>> encode_scales(
+    const Tensors& references, const Tensors& images, const std::vector<int64_t>& patches,
+    const std::vector<int64_t>& strides, const Tensors& dictionaries, const Tensors& grams,
+    int64_t sparsity, bool per_half, double tolerance) {
+  const size_t scales = references.size();
+  TORCH_CHECK(scales >= 1 && images.size() == scales && patches.size() == scales &&
+                  strides.size() == scales && dictionaries.size() == scales &&
+                  grams.size() == scales,
+              "one reference, image, patch side, stride, dictionary and Gram matrix per scale");
+  auto scale = [&, per_half, tolerance, sparsity](size_t s) {
+    return encode_scale(references[s], images[s], patches[s], strides[s], dictionaries[s],
+                        grams[s], sparsity, per_half, tolerance);
+  };
+  std::vector<std::shared_future<Tensors>> others;
+  for (size_t s = 1; s < scales; ++s) {
+    others.push_back(on_helper([reference = references[s], image = images[s], patch = patches[s],
+                                stride = strides[s], dictionary = dictionaries[s],
+                                gram = grams[s], sparsity, per_half, tolerance] {
+      return encode_scale(reference, image, patch, stride, dictionary, gram, sparsity, per_half,
+                          tolerance);
+    }));
+  }
+  std::vector<Tensors> encoded(scales);
+  std::exception_ptr failure;
+  try {
+    encoded[0] = scale(0);
+  } catch (...) {
+    failure = std::current_exception();
+  }
+  for (size_t s = 1; s < scales; ++s) {   // every scale finished before anything is raised
+    try {
+      encoded[s] = others[s - 1].get();
+    } catch (...) {
+      if (!failure) failure = std::current_exception();
+    }
+  }
+  if (failure) std::rethrow_exception(failure);
+  Tensors activities, errors;
+  for (const Tensors& e : encoded) {
+    activities.push_back(e[3]);
+    errors.push_back(e[4]);
+  }
+  at::Tensor state = at::cat(activities, 1);
+  at::Tensor reward = at::stack(errors).sum(at::IntArrayRef{0}).neg();
+  return {state, reward, encoded};
+}
+
+// Dictionary steps running on the helper thread; wait() gives their Gram matrices.
+class PendingSteps {
+ public:
+  explicit PendingSteps(std::shared_future<Tensors> grams) : grams_(std::move(grams)) {}
+  Tensors wait() const { return grams_.get(); }
+  bool done() const {
+    return grams_.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
+  }
+
+ private:
+  std::shared_future<Tensors> grams_;
+};
+
+// Each scale's dictionary_step, in scale order, on the helper thread: per scale its dictionary
+// (changed in place), its chunks' picks, coefficients and residuals, and its step size. Nothing
+// may read or write the dictionaries until wait() has returned.
+PendingSteps start_dictionary_steps(const Tensors& dictionaries,
+                                    const std::vector<Tensors>& picks,
+                                    const std::vector<Tensors>& coefficients,
+                                    const std::vector<Tensors>& residuals,
+                                    const std::vector<double>& alphas, double min_norm) {
+  const size_t scales = dictionaries.size();
+  TORCH_CHECK(picks.size() == scales && coefficients.size() == scales &&
+                  residuals.size() == scales && alphas.size() == scales,
+              "one dictionary, list of chunks and step size per scale");
+  return PendingSteps(on_helper([=] {
+    Tensors grams;
+    for (size_t s = 0; s < scales; ++s) {
+      grams.push_back(dictionary_step(dictionaries[s], picks[s], coefficients[s], residuals[s],
+                                      alphas[s], min_norm));
+    }
+    return grams;
+  }));
+}
+
 }  // namespace
 
 // The GIL is released while they run: they touch tensors only, and the world renders the next
@@ -556,4 +752,18 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
         "picks and e; returns picks, coefficients, residuals, theta, e", py::arg("reference"),
         py::arg("raw"), py::arg("dictionary"), py::arg("gram"), py::arg("sparsity"),
         py::arg("per_half"), py::arg("tolerance"), release_gil());
+  m.def("encode_scales", &encode_scales,
+        "every scale's encoding of the same images, the first on this thread and the others on "
+        "the helper thread; returns theta, the reward and per scale encode_pairs' tensors and "
+        "the raw patches", py::arg("references"), py::arg("images"), py::arg("patches"),
+        py::arg("strides"), py::arg("dictionaries"), py::arg("grams"), py::arg("sparsity"),
+        py::arg("per_half"), py::arg("tolerance"), release_gil());
+  py::class_<PendingSteps>(m, "PendingSteps")
+      .def("wait", &PendingSteps::wait, "the steps' Gram matrices, once they have finished",
+           release_gil())
+      .def("done", &PendingSteps::done);
+  m.def("start_dictionary_steps", &start_dictionary_steps,
+        "each scale's dictionary step on the helper thread, in scale order",
+        py::arg("dictionaries"), py::arg("picks"), py::arg("coefficients"), py::arg("residuals"),
+        py::arg("alphas"), py::arg("min_norm"), release_gil());
 }

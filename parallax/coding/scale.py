@@ -19,6 +19,7 @@ from parallax.config.schema import CoderConfig
 
 from . import native
 from .dictionary import (
+    chunks_and_step,
     exact_pooled_activity_kernel,
     gradient_step_,
     gradient_step_and_gram_,
@@ -40,7 +41,7 @@ from .retina import (
 #: force the kernels or the numpy/torch code, for the pursuit and the dictionary update alike
 #: (same results); "recompute": correlations recomputed from the residual at every step.
 PURSUITS = ("gram", "gram_cpp", "gram_torch", "recompute")
-_KERNELS = {"gram": None, "gram_cpp": "cpp", "gram_torch": "torch"}
+KERNELS = {"gram": None, "gram_cpp": "cpp", "gram_torch": "torch"}
 
 
 @dataclass
@@ -96,12 +97,8 @@ class ScaleCoder(nn.Module):
 
     def _dictionary_key(self) -> tuple:
         """Changes whenever the dictionary does (in place or replaced)."""
-        return (
-            self.dictionary.data_ptr(),
-            self.dictionary._version,
-            self.dictionary.device,
-            self.dictionary.dtype,
-        )
+        dictionary = self._buffers["dictionary"]  # once: a module's buffer lookup is slow
+        return (dictionary.data_ptr(), dictionary._version, dictionary.device, dictionary.dtype)
 
     @torch.no_grad()
     def set_reference(self, gray: torch.Tensor) -> None:
@@ -119,11 +116,7 @@ class ScaleCoder(nn.Module):
         self, gray: torch.Tensor, robots: slice
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """The cached I0 patches of ``robots`` and the raw patches of their (B,H,W) images."""
-        if self.reference is None:
-            raise RuntimeError("no reference image: call set_reference(I0) before encoding")
-        reference = self.reference[robots]
-        if gray.shape[0] != reference.shape[0]:
-            raise ValueError(f"got {gray.shape[0]} images for {reference.shape[0]} references")
+        reference = self.references_of(robots, gray.shape[0])
         return reference, scale_patches(gray.to(self.dictionary.device), self.spec)
 
     def encode(self, patches: torch.Tensor, dense_codes: bool = True) -> SparseCode:
@@ -136,7 +129,7 @@ class ScaleCoder(nn.Module):
             self.dictionary,
             self.sparsity,
             self.gram(),
-            kernel=_KERNELS[self.pursuit],
+            kernel=KERNELS[self.pursuit],
             dense_codes=dense_codes,
         )
 
@@ -146,11 +139,8 @@ class ScaleCoder(nn.Module):
         chunks of robots, in order), then unit-norm atoms again: with ``robot_updates`` "each"
         the sum of every robot's own step, with "mean" the mean of the robots' steps."""
         chunks = [code] if isinstance(code, SparseCode) else list(code)
-        images = 1
-        if self.robot_updates == "each":
-            patches = sum(chunk.residuals.shape[0] for chunk in chunks)
-            images = max(patches // self.spec.patch_count, 1)
-        step = (self.dictionary, chunks, self.learning_rate, _KERNELS.get(self.pursuit))
+        step = (self.dictionary, chunks, self.learning_rate, KERNELS.get(self.pursuit))
+        images = self._images(chunks)
         if self.pursuit == "recompute":  # its pursuit reads no Gram matrix
             gradient_step_(*step, images=images)
             return
@@ -161,6 +151,27 @@ class ScaleCoder(nn.Module):
             gradient_step_(*step, images=images)
             gram = gram_matrix(self.dictionary)
         self._gram, self._gram_key = gram, self._dictionary_key()
+
+    def _images(self, chunks: Sequence[SparseCode]) -> int:
+        """How many images' steps the dictionary step sums: with ``robot_updates`` "each" one
+        per image of the chunks, with "mean" one."""
+        if self.robot_updates != "each":
+            return 1
+        patches = sum(chunk.residuals.shape[0] for chunk in chunks)
+        return max(patches // self.spec.patch_count, 1)
+
+    def step_size(self, chunks: Sequence[SparseCode]) -> float | None:
+        """The step size :meth:`learn_from` takes with these chunks (None: no patches)."""
+        return chunks_and_step(list(chunks), self.learning_rate, self._images(chunks))[1]
+
+    def references_of(self, robots: slice, images: int) -> torch.Tensor:
+        """The cached I0 patches of ``robots``, which must be ``images`` many."""
+        if self.reference is None:
+            raise RuntimeError("no reference image: call set_reference(I0) before encoding")
+        reference = self.reference[robots]
+        if images != reference.shape[0]:
+            raise ValueError(f"got {images} images for {reference.shape[0]} references")
+        return reference
 
     @torch.no_grad()
     def encode_images(
@@ -186,13 +197,13 @@ class ScaleCoder(nn.Module):
             self.pursuit != "recompute"
             and raw.device.type == "cpu"
             and exact_pooled_activity_kernel(
-                patches, self.atoms, self.sparsity, raw.dtype, _KERNELS[self.pursuit]
+                patches, self.atoms, self.sparsity, raw.dtype, KERNELS[self.pursuit]
             )
         )
         if from_picks:
             # The whole encoding in one compiled call, which keeps the GIL released throughout:
             # the other scale encodes on another thread at the same time (same results).
-            compiled = native.kernels_for(_KERNELS[self.pursuit], raw)
+            compiled = native.kernels_for(KERNELS[self.pursuit], raw)
             picks, coefficients, residuals, activity, error = compiled.encode_pairs(
                 reference,
                 raw,

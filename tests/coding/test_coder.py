@@ -364,3 +364,66 @@ def test_the_consecutive_pairing_codes_each_image_against_the_one_before(pursuit
     against_previous.set_reference(frames[0])
     same = against_previous.encode(frames[0][:1], robots=slice(0, 1)).output.reward
     torch.testing.assert_close(first, same, rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("normalisation", ["per_half", "joint"])
+@pytest.mark.parametrize("pairing", ["reference", "consecutive"])
+def test_one_compiled_call_encodes_and_learns_as_the_scales_do_one_by_one(
+    normalisation: str, pairing: str
+) -> None:
+    """Every scale in one compiled call (the first on this thread, the others and the dictionary
+    steps on the kernels' helper thread) gives each scale's own calls' numbers, bit for bit:
+    outputs, codes, dictionaries, Gram matrices and the consecutive pairing's references, over
+    chunks of robots and several steps."""
+    from parallax.coding import DictionarySteps, native
+
+    if native.load_kernels() is None:
+        pytest.skip("the compiled kernels are unavailable here")
+    one_call, by_scale = (
+        _coder(normalisation=normalisation, pairing=pairing, scale_specs=SMALL_SPECS, image_size=64)
+        for _ in range(2)
+    )
+    by_scale._compiled_scales = lambda: None  # each scale's own calls, on the Python helper
+    assert one_call._compiled_scales() is not None
+    references = _photo_batch(3, size=64)
+    one_call.set_reference(references)
+    by_scale.set_reference(references)
+    for shift in range(1, 4):
+        images = _photo_batch(3, size=64, shift=shift)
+        chunks = (slice(0, 2), slice(2, 3))
+        mine = [one_call.encode_frame(images[robots], robots) for robots in chunks]
+        theirs = [by_scale.encode_frame(images[robots], robots) for robots in chunks]
+        for got, expected in zip(mine, theirs, strict=True):
+            assert torch.equal(got.output.state, expected.output.state)
+            assert torch.equal(got.output.reward, expected.output.reward)
+            for scale in ("coarse", "fine"):
+                assert torch.equal(got.output.errors[scale], expected.output.errors[scale])
+                for part in ("atom_indices", "coefficients", "residuals"):
+                    assert torch.equal(
+                        getattr(got.codes[scale], part), getattr(expected.codes[scale], part)
+                    )
+        steps = one_call.learn_from_async(mine)
+        assert isinstance(steps, DictionarySteps)
+        steps.result()
+        by_scale.learn_from_async(theirs).result()
+        for scale in ("coarse", "fine"):
+            mine_scale, their_scale = one_call.coders[scale], by_scale.coders[scale]
+            assert torch.equal(mine_scale.dictionary, their_scale.dictionary)
+            assert torch.equal(mine_scale.gram(), their_scale.gram())
+            assert torch.equal(mine_scale.reference, their_scale.reference)
+
+
+def test_a_failed_compiled_dictionary_step_raises_when_waited_for() -> None:
+    """An error on the kernels' helper thread reaches the caller of ``result()``."""
+    from parallax.coding import native
+
+    compiled = native.load_kernels()
+    if compiled is None:
+        pytest.skip("the compiled kernels are unavailable here")
+    dictionary = torch.zeros(4, 6)
+    picks = torch.full((2, 1), 9)  # atom 9 of 4
+    pending = compiled.start_dictionary_steps(
+        [dictionary], [[picks]], [[torch.ones(2, 1)]], [[torch.ones(2, 6)]], [0.1], 1e-12
+    )
+    with pytest.raises(RuntimeError, match="not one of the 4 atoms"):
+        pending.wait()

@@ -421,7 +421,7 @@ def test_kernels_that_differ_by_one_bit_are_refused_at_load_time(compiled, monke
         return picks, torch.nextafter(coefficients, torch.full_like(coefficients, np.inf))
 
     names = ("codes_and_residuals", "residuals_only", "codes_times_residuals", "dictionary_step")
-    names += ("encode_pairs", "pooled_activity")
+    names += ("encode_pairs", "pooled_activity", "encode_scales", "start_dictionary_steps")
     off = SimpleNamespace(gram_pursuit=gram_pursuit, **{n: getattr(compiled, n) for n in names})
     monkeypatch.setattr(native, "_build", lambda: off)
     monkeypatch.setattr(native, "_loaded", False)
