@@ -13,21 +13,20 @@ from __future__ import annotations
 import numpy as np
 from omegaconf import DictConfig
 
-from parallax.config import READOUT_PANS, distance_readout
 from parallax.distance.planner import MovementPlanner
 from parallax.loop import Route
 from parallax.metrics import DistanceErrorTracker
 from parallax.parts import Parts
 from parallax.presentation import Presentation
+from parallax.readouts import PanReadout
 from parallax.record import Route as RouteRecord
 
 
-def planned_route(planner: MovementPlanner, readout_key: str) -> Route:
-    """The planner as the loop's route, reading s as ``readout_key`` (the Presentation field of
-    train.distance_readout)."""
+def planned_route(planner: MovementPlanner, readout: type[PanReadout]) -> Route:
+    """The planner as the loop's route, reading s as ``readout`` (train.distance_readout's)."""
 
     def choose(visited: list[int], so_far: Presentation) -> int | None:
-        pans = getattr(so_far, readout_key)[0]
+        pans = so_far.read(readout)[0]
         return planner.next_position(visited, pans[visited])
 
     return choose
@@ -62,21 +61,21 @@ class Planned(Sweep):
         planner: MovementPlanner,
         explore_random: np.random.RandomState,
         explore: float,
-        readout_key: str,
+        readout: type[PanReadout],
         window: int,
     ) -> None:
         self.planner, self.explore_random, self.explore = planner, explore_random, float(explore)
-        self.readout_key = readout_key
+        self.readout = readout
         self.errors = DistanceErrorTracker(window=window)
 
     def route(self) -> Route | None:
         draw = self.explore_random.random_sample()  # drawn every time, ready or not
         if not self.planner.is_ready or draw < self.explore:
             return None
-        return planned_route(self.planner, self.readout_key)
+        return planned_route(self.planner, self.readout)
 
     def after(self, pres: Presentation, learnt_distance: bool) -> RouteRecord:
-        pans = getattr(pres, self.readout_key)[0]
+        pans = pres.read(self.readout)[0]
         if learnt_distance and pres.route is None:  # a full sweep: the planner's queue learns it
             self.planner.observe(pans, float(pres.distances[0]))
         lateral_cm = [100.0 * l for l in pres.lateral_positions]
@@ -103,10 +102,10 @@ class Planned(Sweep):
         self.errors.load_state_dict(state["route_dist"])
 
 
-def movement(cfg: DictConfig, parts: Parts) -> Sweep:
-    """The run's movement: a sweep of L, or planned routes with movement.route=planned."""
+def movement(cfg: DictConfig, parts: Parts, readout: type[PanReadout]) -> Sweep:
+    """The run's movement: a sweep of L, or planned routes (movement.route=planned) reading s
+    as ``readout``."""
     if parts.planner is None:
         return Sweep()
-    readout_key = READOUT_PANS[distance_readout(cfg)]
     window = int(cfg.metrics.distance_window)
-    return Planned(parts.planner, parts.explore, float(cfg.movement.explore), readout_key, window)
+    return Planned(parts.planner, parts.explore, float(cfg.movement.explore), readout, window)

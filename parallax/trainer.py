@@ -31,9 +31,7 @@ from omegaconf import DictConfig, OmegaConf
 from parallax import checkpoint
 from parallax.compressed import read_record, record_file, record_forms
 from parallax.config import (
-    READOUT_PANS,
     RUN_CONFIG_NAME,
-    distance_readout,
     growth_start,
     perturbation_start,
     start_jitter_on,
@@ -51,6 +49,7 @@ from parallax.movement import movement
 from parallax.panel import montage_picks, panel_frames, pictured_count, watched
 from parallax.parts import Parts
 from parallax.presentation import Presentation
+from parallax.readouts import READOUTS, of_run
 from parallax.record import PresentationRecord
 from parallax.run_folder import remove_leftovers, write_atomic
 from parallax.run_log import RunLog, can_write_video
@@ -84,7 +83,8 @@ class Trainer:
             torch.set_num_threads(int(cfg.train.threads))
         self.exp = Experiment(cfg, parts=parts)
         self.learn_distance = distance_step(self.exp.parts)
-        self.movement = movement(cfg, self.exp.parts)
+        self.readout = of_run(cfg)  # which pan of each trial s holds
+        self.movement = movement(cfg, self.exp.parts, self.readout)
         self.eye = EyeMovementTracker(
             self.exp.lateral_positions, window=int(cfg.metrics.mae_window)
         )
@@ -231,7 +231,7 @@ class Trainer:
         learnt_distance, walked = self.exp.on_final_list, None
         self.distance_fitted = False
         if learnt_distance and pres.route is None:
-            pans = getattr(pres, READOUT_PANS[distance_readout(self.cfg)])
+            pans = pres.read(self.readout)
             stats, walked = self.learn_distance(pans, pres.distances, self.dist)
             self.last_distance_stats = stats or self.last_distance_stats
             self.distance_fitted = bool(stats.get("trained"))
@@ -258,7 +258,7 @@ class Trainer:
             distance_error=self.dist.by_range(),
             pans=pres.pans.tolist(),
             distances=pres.distances.tolist(),
-            best_pans=pres.best_pans.tolist(),
+            readouts={r.key: pres.read(r).tolist() for r in READOUTS.values() if not r.paper},
             start_pans=pres.start_pans.tolist(),
             start_jitter=jittered,
             learnt_distance=learnt_distance,
@@ -359,9 +359,9 @@ class Trainer:
 
     def _panel(self, watch: Watch, pres: Presentation) -> list:
         """The frames of robot 0's presentation (parallax.panel), small for TensorBoard."""
-        readout = distance_readout(self.cfg)
         title = f"presentation {self.presentation}: panel at {pres.distances[0]:.1f} m"
-        shown = watched(watch, pres, self.exp.parts, readout, title, self.learn_distance.truths)
+        truths = self.learn_distance.truths
+        shown = watched(watch, pres, self.exp.parts, self.readout, title, truths)
         # without a video writer TensorBoard gets a montage of four frames: draw only those
         picks = None if can_write_video() else montage_picks(pictured_count(shown))
         return list(panel_frames(shown, width=PANEL_WIDTH, picks=picks))

@@ -143,6 +143,7 @@ ADDED_SETTINGS = {
     ("distance", "warm_start"): True,
     ("distance", "keep_first_scaling"): False,
     ("env", "fovea_px"): None,  # every pixel rendered at full resolution
+    ("distance", "estimator"): "network",
 }
 
 
@@ -297,19 +298,6 @@ def growth_start(cfg) -> int | None:
     if fraction is None:
         return None
     return int(round(float(fraction) * int(cfg["train"]["presentations"])))
-
-
-#: How a trial's pan becomes a component of s: "last", the pan at its last iteration (the paper's
-#: q_p, eq. 16); "best_reward" (beyond the paper), the pan whose image the coder encoded best
-#: during the trial. The trainer, parallax-replay and parallax-eval share these names.
-#: Each readout names the Presentation field and the metrics.jsonl key that hold its pans.
-READOUT_PANS = {"last": "pans", "best_reward": "best_pans"}
-DISTANCE_READOUTS = tuple(READOUT_PANS)
-
-
-def distance_readout(cfg) -> str:
-    """The run's ``train.distance_readout`` (``cfg``: a DictConfig or a plain dict)."""
-    return str(cfg["train"]["distance_readout"])
 
 
 def start_jitter_on(cfg, presentation: int) -> bool:

@@ -376,6 +376,9 @@ class DistanceConfig:
     #: configures mapminmax only on a network not yet configured); false: refit it to each fit's
     #: queue, the weights re-expressed so that the network's function is unchanged.
     keep_first_scaling: bool = False
+    #: What reads a distance from s, one of parallax/distance/estimators/: network, the MLP
+    #: above (eqs. 13–15), as in the paper.
+    estimator: str = "network"
     #: Filled by the trainer: the network's initialisation seed.
     seed: int = MISSING
 
@@ -453,9 +456,9 @@ class TrainConfig:
     #: presentations start their trials from a jittered pan, so that the last trials (Tables
     #: 2–3) are measured from pan 0 as in the paper. null: every presentation.
     start_jitter_presentations: int | None = None
-    #: How a trial's pan becomes its component of s: last, its last pan (the paper's q_p, eq. 16)
-    #: | best_reward (beyond the paper), the pan whose image the coder encoded best in that
-    #: trial, which a runaway at the trial's end does not spoil.
+    #: How a trial's pan becomes its component of s, one of parallax/readouts/: last, its last
+    #: pan (the paper's q_p, eq. 16) | best_reward (beyond the paper), the pan whose image the
+    #: coder encoded best in that trial, which a runaway at the trial's end does not spoil.
     distance_readout: str = "best_reward"
     #: Which checkpoint a resumed run continues from: latest (checkpoint.pt) | previous
     #: (checkpoint_previous.pt, the one written before it), for a latest one that is damaged.

@@ -20,8 +20,9 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from parallax.config.errors import ConfigError
-from parallax.config.plumbing import DISTANCE_READOUTS, closest_key, schema_keys
+from parallax.config.plumbing import closest_key, schema_keys
 from parallax.config.schema import PERIPHERY_SUBSAMPLE, ROBOT_UPDATES
+from parallax.readouts import READOUTS
 
 #: Settings the trainer fills at run time; ``???`` in a composed config.
 RUN_TIME_KEYS = frozenset(
@@ -170,7 +171,7 @@ def _run(check: _Checks) -> None:
     check.integer("train.threads", 0, " (0: torch's default)")
     if check.get("train.start_jitter_presentations") is not None:
         check.integer("train.start_jitter_presentations", 0, " or null")
-    check.choice("train.distance_readout", DISTANCE_READOUTS)
+    check.choice("train.distance_readout", READOUTS)
     check.choice("train.resume_from", RESUME_FROM)
     check.number("train.critic_scale_warning", above=0, what=" (|v·φ|)")
     if check.get("train.stop_after_non_finite") is not None:
@@ -315,6 +316,7 @@ def _distance(check: _Checks) -> None:
             queue,
             f"× {params} parameters exceeds distance.lm.max_jacobian_elements={max_jacobian}",
         )
+    from parallax.distance.estimators import ESTIMATORS
     from parallax.distance.network import INPUT_SCALINGS
     from parallax.distance.targets import TARGET_SOURCES
 
@@ -329,6 +331,7 @@ def _distance(check: _Checks) -> None:
             "and distance.validation_fraction must leave some of the queue to fit",
         )
     check.integer("distance.max_fail", 1, " (epochs)")
+    check.choice("distance.estimator", ESTIMATORS)
     check.choice("distance.targets", sorted(TARGET_SOURCES))
     check.number("distance.odometry.walk_fraction", above=0, at_most=1)
     check.number("distance.odometry.nominal_stride_m", above=0, what=" (metres)")

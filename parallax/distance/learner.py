@@ -27,6 +27,7 @@ import torch
 from torch import Tensor
 
 from parallax.config.schema import DistanceConfig, default
+from parallax.distance.estimators import ESTIMATORS
 from parallax.distance.levenberg_marquardt import LevenbergMarquardt
 from parallax.distance.metrics import distance_error_by_range
 from parallax.distance.network import DistanceMLP
@@ -67,6 +68,7 @@ class DistanceLearner:
         reset_mu: bool = DistanceConfig.reset_mu,
         warm_start: bool = DistanceConfig.warm_start,
         keep_first_scaling: bool = DistanceConfig.keep_first_scaling,
+        estimator: str = DistanceConfig.estimator,
     ) -> None:
         """The settings are distance.*'s (parallax.config checks them); ``sensitivity``, ``lm``
         and ``odometry`` may give only some of their node's settings, the others keep the
@@ -99,6 +101,8 @@ class DistanceLearner:
         self.init_generator = torch.Generator().manual_seed(int(seed) + 2)
         self.fits = 0
         self.observations = 0
+        # what reads a distance from s: the network, or another estimator of the same queue
+        self.estimator = ESTIMATORS[estimator](self)
 
     @property
     def is_ready(self) -> bool:
@@ -240,7 +244,8 @@ class DistanceLearner:
         )
 
     def predict(self, S: Tensor | np.ndarray | Sequence[Sequence[float]]) -> Tensor | np.ndarray:
-        """(n, r) pans in degrees → (n,) metres (or (r,) → a scalar), weighted as in training.
+        """(n, r) pans in degrees → (n,) metres (or (r,) → a scalar), as the run's estimator
+        (distance.estimator) reads them.
 
         Returns a float64 tensor for a tensor input, a NumPy array otherwise.
         """
@@ -249,9 +254,7 @@ class DistanceLearner:
                 f"distance learner is not ready (queue {self.queue.fill}/{self.queue.capacity}, "
                 f"{self.fits} fits); check is_ready before predict"
             )
-        inputs = self._as_inputs(S)
-        with torch.no_grad():
-            distances = self.network(inputs * self.weights)
+        distances = self.estimator.predict(self._as_inputs(S))
         return distances.to(S.device) if isinstance(S, Tensor) else distances.cpu().numpy()
 
     def queue_error(self) -> dict[str, float]:

@@ -36,9 +36,6 @@ from omegaconf import OmegaConf
 
 from parallax import checkpoint
 from parallax.config import (
-    DISTANCE_READOUTS,
-    READOUT_PANS,
-    distance_readout,
     load_run_config,
     perturbation_start,
     start_jitter_on,
@@ -49,6 +46,7 @@ from parallax.envs.stimuli import SPLITS
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
 from parallax.movement import planned_route
+from parallax.readouts import READOUTS
 from parallax.run_folder import RunLock, RunLocked, write_atomic
 from parallax.tools import plots
 from parallax.tools.console import footer, header, progress
@@ -84,9 +82,9 @@ def run_jobs(
             env.task.set_next_stimulus(texture_index=tex, distance=d)
         pres = exp.run_presentation(learn=False, greedy=greedy, route=route)
         routes.append(pres.route)
-        pans.append(getattr(pres, READOUT_PANS[readout])[: len(batch)])
-        for name, attribute in READOUT_PANS.items():
-            other_pans.setdefault(name, []).append(getattr(pres, attribute)[: len(batch)])
+        pans.append(pres.read(READOUTS[readout])[: len(batch)])
+        for name, other in READOUTS.items():
+            other_pans.setdefault(name, []).append(pres.read(other)[: len(batch)])
         targets.append(pres.targets[: len(batch)])
         dists.append(pres.distances[: len(batch)])
         starts.append(pres.start_pans[: len(batch)])
@@ -214,10 +212,8 @@ def evaluate(
         raise ValueError(f"--start-jitter must be auto, on or off, got {start_jitter!r}")
     if split not in SPLITS:
         raise ValueError(f"--split must be one of {', '.join(SPLITS)}, got {split!r}")
-    if readout is not None and readout not in DISTANCE_READOUTS:
-        raise ValueError(
-            f"--readout must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}"
-        )
+    if readout is not None and readout not in READOUTS:
+        raise ValueError(f"--readout must be one of {', '.join(READOUTS)}, got {readout!r}")
     run_dir = Path(run_dir)
     out_dir = Path(out) if out else run_dir
     cfg = load_run_config(run_dir)
@@ -225,7 +221,8 @@ def evaluate(
     if problem:  # before the trials, which take minutes
         where = f"--out {out}" if out else str(run_dir)
         raise ValueError(f"{where}: {problem}; choose another folder with --out DIR")
-    readout = readout or distance_readout(cfg)  # by default, s as the run's distance learner saw it
+    # by default, s as the run's distance learner saw it
+    readout = readout or str(cfg.train.distance_readout)
     state = read_checkpoint(run_dir, cfg, checkpoint_name, device)
     ckpt_path = run_dir / checkpoint_name
     for item in stimuli:
@@ -343,15 +340,14 @@ def evaluate(
                 for part, done in (("grid", runs["greedy"]), ("between", between_run))
                 if done is not None
             }
-            for name in READOUT_PANS
+            for name in READOUTS
         }
         curves = {}
         if planning:
             # the planning robot's own routes, greedy, on the grid's presentations
-            key = READOUT_PANS[readout]
             for env, stream in zip(exp.envs, start_streams, strict=True):
                 env.task.random.set_state(stream)
-            route = planned_route(exp.planner, key)
+            route = planned_route(exp.planner, READOUTS[readout])
             routed = run_jobs(exp, jobs, True, readout, route=route, bar=bar)
             estimates = [
                 exp.planner.estimate(v, s[v]) for v, s in zip(routed["routes"], routed["pans"])

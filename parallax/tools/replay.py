@@ -3,9 +3,9 @@
 The distance learner never acts on the world: the eye-movement vectors s it sees depend only on
 the world, the coder and the policy. So a run's metrics.jsonl, which logs every s with its true
 distance in order, lets the learner be re-run with another weighting y, queue size c, weighting
-on/off or readout (``train.distance_readout``: each trial's last and best-encoded pans are both
-logged), and the result is exactly what `parallax-train` would have reported with that setting
-and the same seed (tests/tools/test_replay.py checks this bit for bit). That makes the y, c and
+on/off or readout (``train.distance_readout``: s as every pan readout reads it is logged), and
+the result is exactly what `parallax-train` would have reported with that setting and the same
+seed (tests/tools/test_replay.py checks this bit for bit). That makes the y, c and
 weighting ablations of Table 4 cost seconds per setting instead of a full run each.
 
     parallax-replay SOURCE_RUN_OR_MULTIRUN --out DIR distance.y=0,0.5,1,2
@@ -40,10 +40,7 @@ from parallax import checkpoint
 from parallax.checkpoint import BEFORE_PERTURBATION_NAME, CHECKPOINT_NAME
 from parallax.config import (
     CONFIG_MODULE,
-    DISTANCE_READOUTS,
-    READOUT_PANS,
     RUN_CONFIG_NAME,
-    distance_readout,
     flatten,
     growth_start,
     load_run_config,
@@ -53,6 +50,7 @@ from parallax.distance_step import learn_online
 from parallax.envs.walk import walk_robots
 from parallax.metrics import DistanceErrorTracker, finite_or_none
 from parallax.parts import body_walkers, distance_learner, truths_at, worlds
+from parallax.readouts import READOUTS
 from parallax.run_folder import RunLock, RunLocked, write_atomic
 from parallax.tools.console import footer, header, progress
 from parallax.tools.report.groups import mean_sd
@@ -94,7 +92,7 @@ def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
 
 
 def _check_replayable(item: str, key: str) -> None:
-    # the readout only picks which of the two logged pans of each trial s is built from; the
+    # the readout only picks which of the logged pans of each trial s is built from; the
     # walk to the panel comes after the sweep, with its own random stream
     if not (key.startswith(REPLAYABLE_PREFIXES) or key == "train.distance_readout"):
         raise ReplayError(
@@ -165,16 +163,16 @@ def replay(
             f"{run_dir / METRICS_NAME} has {len(records)} presentations, the summary "
             f"{summary['presentations']}: the log is incomplete"
         )
-    readout = distance_readout(cfg)
-    if readout not in DISTANCE_READOUTS:
+    readout = str(cfg.train.distance_readout)
+    if readout not in READOUTS:
         raise ReplayError(
-            f"train.distance_readout must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}"
+            f"train.distance_readout must be one of {', '.join(READOUTS)}, got {readout!r}"
         )
-    key = READOUT_PANS[readout]
+    key = READOUTS[readout].key
     if records and key not in records[0]:
         raise ReplayError(
-            f"{run_dir / METRICS_NAME} has no best_pans (the run predates their logging): "
-            "it can be replayed with train.distance_readout=last only"
+            f"{run_dir / METRICS_NAME} has no {key} (the run predates their logging): "
+            f"it cannot be replayed with train.distance_readout={readout}"
         )
     before_tracker = last_stats = before_stats = None
     body = _Body(cfg) if learner.target_source.walks else None

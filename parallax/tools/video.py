@@ -26,8 +26,8 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from parallax import checkpoint
-from parallax.config import READOUT_PANS, distance_readout, load_run_config
+from parallax import checkpoint, readouts
+from parallax.config import load_run_config
 from parallax.distance_step import distance_step
 from parallax.envs.stimuli import SPLITS
 from parallax.movement import planned_route
@@ -99,9 +99,9 @@ def watched_presentations(
         if not 0 <= texture_index < photos:
             raise ValueError(f"--texture must be between 0 and {photos - 1}, got {texture_index}")
         name = exp.envs[0].physics.stimuli.names[texture_index]
-        readout = distance_readout(cfg)
+        readout = readouts.of_run(cfg)
         planner = exp.planner if exp.planner is not None and exp.planner.is_ready else None
-        route = None if planner is None else planned_route(planner, READOUT_PANS[readout])
+        route = None if planner is None else planned_route(planner, readout)
         truths = distance_step(exp.parts).truths
         say(
             f"[parallax-render] {run_dir}/{checkpoint_name} (presentation "
