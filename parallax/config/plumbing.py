@@ -1,8 +1,8 @@
 """Hydra plumbing for the apps: composing the configuration, naming run directories, reading a
 run's saved configuration back and comparing it with another one.
 
-The settings themselves are in :mod:`parallax.config.schema`; their checks in
-:mod:`parallax.config.validate`.
+The settings themselves are in :mod:`parallax.config.schema` (each part's in its
+``settings.py``, beside their checks); :mod:`parallax.config.validate` runs the checks.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from parallax.config.schema import Config, SweepConfig, register
+from parallax.envs.settings import growth_start
 
 #: The Hydra config package; ``conf/`` ships inside the installed package as ``parallax.conf``.
 CONFIG_MODULE = "parallax.conf"
@@ -289,15 +290,6 @@ def perturbation_start(cfg) -> int | None:
     if fraction is None or total is None:
         return None
     return int(round(float(fraction) * int(total)))
-
-
-def growth_start(cfg) -> int | None:
-    """Presentation index from which the body's grown stride is used (None: never): the one place
-    ``env.walk.growth_start_fraction`` becomes a presentation (the trainer and parallax-replay)."""
-    fraction = cfg["env"]["walk"]["growth_start_fraction"]  # a DictConfig or a plain dict
-    if fraction is None:
-        return None
-    return int(round(float(fraction) * int(cfg["train"]["presentations"])))
 
 
 def start_jitter_on(cfg, presentation: int) -> bool:

@@ -26,12 +26,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from parallax.config.schema import DistanceConfig, default
+from parallax.checks import default
 from parallax.distance.estimators import ESTIMATORS
 from parallax.distance.levenberg_marquardt import LevenbergMarquardt
 from parallax.distance.metrics import distance_error_by_range
 from parallax.distance.network import DistanceMLP
 from parallax.distance.queue_memory import QueueMemory
+from parallax.distance.settings import DistanceConfig
 from parallax.distance.targets import TargetSource, make_target_source
 from parallax.distance.weighting import position_weights, sensitive_positions
 

@@ -30,7 +30,7 @@ import torch
 from torch import Tensor, nn
 from torch.func import functional_call, jacrev, vmap
 
-from parallax.config.schema import LevenbergMarquardtConfig
+from parallax.distance.settings import LevenbergMarquardtConfig
 
 #: ``closure(forward, *batch)`` returns the residual tensor (any shape; it is flattened).
 ResidualClosure = Callable[..., Tensor]

@@ -28,9 +28,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from parallax.config.schema import DistanceConfig, MovementConfig
 from parallax.distance.inverse_distance import InverseDistanceFit as Fit
 from parallax.distance.inverse_distance import fit_inverse_distance
+from parallax.distance.settings import DistanceConfig, MovementConfig
 
 #: Edges (m) of the distance bins the expected error is conditioned on; the grid is 3–10 m.
 BIN_EDGES_M = (4.0, 5.0, 6.5, 8.0)

@@ -14,10 +14,22 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
+from dataclasses import dataclass
 
 from torch import Tensor
 
-from parallax.config.schema import OdometryConfig
+
+@dataclass
+class OdometryConfig:
+    """The robot's own measure of distance for distance.targets=odometry: strides counted on
+    a walk to the panel (env.walk) times the stride length it believes it has."""
+
+    #: Fraction of presentations that end with a walk (walking is costly); the others give the
+    #: learner no target and are only predicted.
+    walk_fraction: float = 1.0
+    #: The stride length the robot believes it has (m): its unit of distance.
+    nominal_stride_m: float = 0.05
+
 
 TARGET_SOURCES: dict[str, type[TargetSource]] = {}
 

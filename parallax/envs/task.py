@@ -28,8 +28,9 @@ from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
 
-from parallax.config.schema import EnvConfig, PerturbationConfig, default
+from parallax.checks import default
 from parallax.envs.hoap3 import Physics, check_distance
+from parallax.envs.settings import EnvConfig, PerturbationConfig
 from parallax.envs.stimuli import load_stimuli
 from parallax.envs.sweep import body_offsets, sweep_iterations
 from parallax.geometry import ACTION_SET_DEG

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from parallax.config.schema import WalkConfig
 from parallax.envs.hoap3 import Physics
+from parallax.envs.settings import WalkConfig
 
 #: The body part that touches the panel, and the panel.
 HAND_GEOM = "hand_left"

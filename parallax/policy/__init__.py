@@ -6,8 +6,9 @@ observe (θ, and beyond the paper θ_ref, the pans and the reward change) and ``
 the optional normalisations of θ.
 """
 
-from parallax.policy.features import FEATURE_NORMS, FeatureNormalizer, PolicyInputs
+from parallax.policy.features import FeatureNormalizer, PolicyInputs
 from parallax.policy.natural_actor_critic import PAPER_ACTIONS_DEG, NaturalActorCritic
+from parallax.policy.settings import FEATURE_NORMS
 
 __all__ = [
     "FEATURE_NORMS",

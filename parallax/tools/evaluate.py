@@ -42,7 +42,7 @@ from parallax.config import (
     validate_stimuli,
 )
 from parallax.distance_step import distance_step
-from parallax.envs.stimuli import SPLITS
+from parallax.envs.settings import SPLITS
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
 from parallax.movement import planned_route

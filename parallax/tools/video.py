@@ -29,7 +29,7 @@ from tqdm import tqdm
 from parallax import checkpoint, readouts
 from parallax.config import load_run_config
 from parallax.distance_step import distance_step
-from parallax.envs.stimuli import SPLITS
+from parallax.envs.settings import SPLITS
 from parallax.movement import planned_route
 from parallax.panel import PANEL_COLOURS, Watched, frame_size, panel_frames, watched
 from parallax.tools.evaluate import frozen_experiment, read_checkpoint
