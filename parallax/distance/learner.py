@@ -39,7 +39,8 @@ from parallax.distance.weighting import position_weights, sensitive_positions
 STATE_VERSION = 1
 
 
-def _regression_residuals(forward, inputs: Tensor, targets: Tensor) -> Tensor:  # type: ignore[no-untyped-def]
+def regression_residuals(forward, inputs: Tensor, targets: Tensor) -> Tensor:  # type: ignore[no-untyped-def]
+    """The network's errors on a batch, the residuals Levenberg–Marquardt minimises (eq. 15)."""
     return forward(inputs) - targets
 
 
@@ -212,11 +213,11 @@ class DistanceLearner:
 
                 def validation() -> float:
                     with torch.no_grad():
-                        errors = _regression_residuals(self.network, check_inputs, check_targets)
+                        errors = regression_residuals(self.network, check_inputs, check_targets)
                     return float(errors.square().sum())
 
         result = self.optimizer.run(
-            _regression_residuals,
+            regression_residuals,
             fit_inputs,
             fit_targets,
             epochs=epochs,
@@ -230,7 +231,7 @@ class DistanceLearner:
             # result.sse holds λ‖w‖² too, or covers the training rows only: report the data's
             # error over the whole queue
             with torch.no_grad():
-                mse = float(_regression_residuals(self.network, weighted, targets).square().mean())
+                mse = float(regression_residuals(self.network, weighted, targets).square().mean())
         return dict(
             trained=1.0,
             loss=mse,

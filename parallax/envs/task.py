@@ -203,6 +203,15 @@ class LateralPursuitTask(base.Task):
         step = float(check_lateral_positions([lateral_m])[0])
         self._episode_positions = (*self._episode_positions[: self._position_index + 1], step)
 
+    def random_state(self) -> tuple:
+        """Where the task's random stream stands (its stimuli, distances and start pans): a
+        checkpoint keeps it, and an evaluation that runs the same presentations twice puts it
+        back (:meth:`set_random_state`)."""
+        return self.random.get_state()
+
+    def set_random_state(self, state: tuple) -> None:
+        self.random.set_state(state)
+
     @property
     def start_jitter_enabled(self) -> bool:
         """Whether new trials start from a jittered pan (when a jitter is configured)."""

@@ -307,7 +307,7 @@ def evaluate(
         runs = {}
         # the worlds' random streams (textures aside: forced; the jittered start pans) as the
         # checkpoint left them, for the planned routes to start from as the sweeps did
-        start_streams = [env.task.random.get_state() for env in exp.envs]
+        start_streams = [env.task.random_state() for env in exp.envs]
         for mode, greedy in modes:
             runs[mode] = run = run_jobs(exp, jobs, greedy, readout, bar=bar)
             err = np.abs(run["pans"] - run["targets"])
@@ -346,7 +346,7 @@ def evaluate(
         if planning:
             # the planning robot's own routes, greedy, on the grid's presentations
             for env, stream in zip(exp.envs, start_streams, strict=True):
-                env.task.random.set_state(stream)
+                env.task.set_random_state(stream)
             route = planned_route(exp.planner, READOUTS[readout])
             routed = run_jobs(exp, jobs, True, readout, route=route, bar=bar)
             estimates = [
@@ -451,7 +451,7 @@ def frozen_experiment(
         learnt = state["experiment"]
         if trained_robots is not None and int(cfg.env.robots) != trained_robots:
             # the checkpoint holds one stream per trained robot; these robots keep their own
-            learnt = {**learnt, "env_random": [env.task.random.get_state() for env in exp.envs]}
+            learnt = {**learnt, "env_random": [env.task.random_state() for env in exp.envs]}
         try:
             exp.load_state_dict(learnt)
         except (KeyError, RuntimeError, TypeError, ValueError, IndexError) as exc:
