@@ -100,10 +100,11 @@ class Experiment:
                 blur_sigma=float(p.blur_sigma) if on else 0.0,
             )
 
-    def set_growth(self, grown: bool) -> None:
-        """The bodies' strides before or after the growth spurt of env.walk."""
+    def at_presentation(self, presentation: int) -> None:
+        """Presentation ``presentation`` (0-based) is next: the bodies' strides before or after
+        the growth spurt of env.walk."""
         for walker in self.parts.walkers:
-            walker.grown = bool(grown)
+            walker.at_presentation(presentation)
 
     # --- one presentation: the paper's loop -----------------------------------------------
     def run_presentation(

@@ -163,7 +163,7 @@ def read_distance(
 ) -> tuple[float, float] | None:
     """Robot 0's distance read from the presentation's s (a planned route: the planner's
     estimate from the positions it visited) and the truth it is scored against (``truths``, a
-    :func:`parallax.distance_step.distance_step`'s ``truths``; default: the panel's distance);
+    target source's ``truths`` (parallax.distance.targets); default: the panel's distance);
     None while the learner that would read it has not learnt yet."""
     pans = pres.read(readout)[0]
     distance = float(pres.distances[0])

@@ -41,7 +41,6 @@ from parallax.config import (
     start_jitter_on,
     validate_stimuli,
 )
-from parallax.distance_step import distance_step
 from parallax.envs.settings import SPLITS
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
@@ -117,7 +116,7 @@ def distance_results(
     """Errors by range and per distance of ``learner`` on the eye-movement vectors ``pans``, and
     the mean absolute error in the learner's metres. ``truths``: what a perfect learner would
     answer (default: the distances; for odometry targets the slip-free walk,
-    ``distance_step(parts).truths``); the ranges stay those of the panels' distances. The
+    ``target_source.truths``); the ranges stay those of the panels' distances. The
     vectors are kept ("samples") so that parallax-replay can score other learners on exactly the
     same eye movements."""
     from parallax.distance.metrics import distance_error_by_range
@@ -361,7 +360,7 @@ def evaluate(
                 exp.distance,
                 runs["greedy"]["pans"],
                 grid_distances,
-                distance_step(exp.parts).truths(grid_distances),
+                exp.distance.target_source.truths(grid_distances, exp.parts),
             )
             pd = result["distance"]["per_distance"]
             curves["grid (held-out textures)"] = ([float(k) for k in pd], list(pd.values()))
@@ -372,14 +371,14 @@ def evaluate(
                     exp.distance,
                     runs["sampled"]["pans"],
                     runs["sampled"]["distances"],
-                    distance_step(exp.parts).truths(runs["sampled"]["distances"]),
+                    exp.distance.target_source.truths(runs["sampled"]["distances"], exp.parts),
                 )
             if between_run is not None:
                 result["distance_between_grid"] = distance_results(
                     exp.distance,
                     between_run["pans"],
                     between_run["distances"],
-                    distance_step(exp.parts).truths(between_run["distances"]),
+                    exp.distance.target_source.truths(between_run["distances"], exp.parts),
                 )
                 pb = result["distance_between_grid"]["per_distance"]
                 curves["between grid points"] = ([float(k) for k in pb], list(pb.values()))

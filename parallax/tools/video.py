@@ -16,6 +16,7 @@ Bad input ends the command with one line, and nothing written.
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import os
 import sys
@@ -28,7 +29,6 @@ from tqdm import tqdm
 
 from parallax import checkpoint, readouts
 from parallax.config import load_run_config
-from parallax.distance_step import distance_step
 from parallax.envs.settings import SPLITS
 from parallax.movement import planned_route
 from parallax.panel import PANEL_COLOURS, Watched, frame_size, panel_frames, watched
@@ -102,7 +102,7 @@ def watched_presentations(
         readout = readouts.of_run(cfg)
         planner = exp.planner if exp.planner is not None and exp.planner.is_ready else None
         route = None if planner is None else planned_route(planner, readout)
-        truths = distance_step(exp.parts).truths
+        truths = functools.partial(exp.distance.target_source.truths, bodies=exp.parts)
         say(
             f"[parallax-render] {run_dir}/{checkpoint_name} (presentation "
             f"{int(state['presentation'])}{', perturbed' if perturbed else ''}), greedy, on "

@@ -166,9 +166,7 @@ def test_works_for_another_small_module_in_float32():
         lambda forward, x, y: forward(x).squeeze(-1) - y, inputs, targets, epochs=100
     )
     assert result.sse < 1e-3 * start
-    assert all(
-        p.dtype == torch.float32 and torch.isfinite(p).all() for p in model.parameters()
-    )
+    assert all(p.dtype == torch.float32 and torch.isfinite(p).all() for p in model.parameters())
 
 
 def test_linear_problem_stops_at_min_grad():

@@ -25,7 +25,7 @@ import torch
 
 from parallax import readouts
 from parallax.config import load_run_config
-from parallax.distance_step import learn_online
+from parallax.distance.online import learn_online
 from parallax.metrics import DistanceErrorTracker
 from parallax.parts import distance_learner
 from parallax.tools.console import footer, header, progress
