@@ -102,10 +102,11 @@ class Experiment:
                 blur_sigma=float(p.blur_sigma) if on else 0.0,
             )
 
-    def set_growth(self, grown: bool) -> None:
-        """The bodies' strides before or after the growth spurt of env.walk."""
+    def at_presentation(self, presentation: int) -> None:
+        """Presentation ``presentation`` (0-based) is next: the bodies' strides before or after
+        the growth spurt of env.walk."""
         for walker in self.parts.walkers:
-            walker.grown = bool(grown)
+            walker.at_presentation(presentation)
 
     # --- one presentation: the paper's loop -----------------------------------------------
     def run_presentation(
@@ -135,7 +136,7 @@ class Experiment:
             "coder": parts.coder.state_dict(),
             "policy": parts.policy.state_dict(),
             "distance": parts.distance.state_dict(),
-            "env_random": [env.task.random.get_state() for env in parts.worlds],
+            "env_random": [env.task.random_state() for env in parts.worlds],
             "stage": self.stage,
             # only a walking run draws from the walkers' streams, only a planning one plans
             **({"walkers": [w.state_dict() for w in parts.walkers]} if self.walks else {}),
@@ -152,7 +153,7 @@ class Experiment:
         parts.policy.load_state_dict(state["policy"])
         parts.distance.load_state_dict(state["distance"])
         for env, rs in zip(parts.worlds, state["env_random"], strict=True):
-            env.task.random.set_state(rs)
+            env.task.set_random_state(rs)
         if self.walks:
             for walker, walker_state in zip(parts.walkers, state["walkers"], strict=True):
                 walker.load_state_dict(walker_state)

@@ -26,9 +26,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from parallax.config import READOUT_PANS
 from parallax.parts import Parts
 from parallax.presentation import Presentation
+from parallax.readouts import PanReadout
 from parallax.watch import Sample, Watch, read_distance, walk_samples
 
 #: What each scale's window is on the retina, and its colour.
@@ -61,7 +61,7 @@ def watched(
     watch: Watch,
     pres: Presentation,
     parts: Parts,
-    readout: str,
+    readout: type[PanReadout],
     title: str,
     truths: Callable | None = None,
     walk: bool = False,
@@ -69,7 +69,7 @@ def watched(
     """What the panel draws of robot 0's presentation ``pres``, watched by ``watch``: s as
     ``readout`` reads it, the distance read (:func:`parallax.watch.read_distance`, against
     ``truths``) and, with ``walk``, the body's walk to the panel."""
-    pans = getattr(pres, READOUT_PANS[readout])[0]
+    pans = pres.read(readout)[0]
     return Watched(
         samples=watch.samples + (walk_samples(watch) if walk else []),
         lateral_positions=list(pres.lateral_positions),
@@ -79,7 +79,7 @@ def watched(
         title=title,
         reading=read_distance(parts, pres, readout, truths),
         continuous=parts.worlds[0].task.continuous,
-        readout=readout,
+        readout=readout.name,
     )
 
 

@@ -20,6 +20,7 @@ import parallax.envs
 from parallax.coding import MultiScaleCoder
 from parallax.distance import DistanceLearner
 from parallax.distance.planner import MovementPlanner
+from parallax.envs.settings import growth_start
 from parallax.envs.walk import Walker
 from parallax.policy import NaturalActorCritic
 
@@ -104,7 +105,7 @@ def worlds(
 
 def body_walkers(cfg: DictConfig, seeds: Seeds | None = None) -> list[Walker]:
     """Each robot's walk to the panel (env.walk; beyond the paper, §7), with its own slip
-    stream. env.walk.growth_start_fraction is the trainer's schedule, not the body's."""
+    stream and the presentation of its growth spurt."""
     walk = cfg.env.walk
     return [
         Walker(
@@ -113,17 +114,10 @@ def body_walkers(cfg: DictConfig, seeds: Seeds | None = None) -> list[Walker]:
             stride_slip=float(walk.stride_slip),
             substeps=int(walk.substeps),
             growth_factor=float(walk.growth_factor),
+            growth_start=growth_start(cfg),
         )
         for seed in (seeds or run_seeds(cfg)).walkers
     ]
-
-
-def truths_at(source, walker: Walker, physics, distances) -> np.ndarray:
-    """A perfect odometry learner's answers for panels at ``distances``: ``source``'s truth of
-    the slip-free walk of ``walker``'s body as it is now (parallax-eval and parallax-replay)."""
-    return np.array(
-        [source.truth(d, walker.reach_strides(physics, d)) for d in distances], dtype=np.float64
-    )
 
 
 @dataclass

@@ -1,14 +1,15 @@
 """What B robots did in one stimulus presentation (paper §3.2, Fig. 3), gathered as it runs.
 
 :class:`Tally` collects, iteration by iteration, what :func:`parallax.loop.presentation` reports:
-the positions visited, q_p (the pan at each trial's last iteration) and α* there, the coder's mean
+the positions visited, q_p (the pan at each trial's last iteration) and α* there, every trial's
+pans and rewards (which a pan readout, :mod:`parallax.readouts`, reads s from), the coder's mean
 reward and errors; :class:`Presentation` is the result, with the policy's mean statistics.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -20,6 +21,14 @@ if TYPE_CHECKING:
     from parallax.executor import Frames
 
 
+class Trials(NamedTuple):
+    """Each trial's iterations: (B, r, t_h) pans (deg) and the coder's rewards (NaN: not yet,
+    or a position not visited)."""
+
+    pans: np.ndarray
+    rewards: np.ndarray
+
+
 @dataclass
 class Presentation:
     """What B robots did during one stimulus presentation."""
@@ -27,9 +36,9 @@ class Presentation:
     lateral_positions: list[float]  # the list L used (metres)
     pans: np.ndarray  # (B, r) pan at the last iteration of each trial, q_p (deg)
     targets: np.ndarray  # (B, r) target pan α* at that iteration (deg)
-    # (B, r) beyond the paper: the pan at the iteration of each trial whose image the coder
-    # encoded best (highest reward −(eC+eF)); a readout of s that a runaway's end does not spoil
-    best_pans: np.ndarray
+    # every trial's pans and rewards, which a pan readout reads s from; None when the body
+    # sweeps L in one trial (env.motion=continuous), whose s is ``pans``, read as it passes l_p
+    trials: Trials | None
     distances: np.ndarray  # (B,) metres
     textures: np.ndarray  # (B,) texture indices
     steps: int  # iterations per robot
@@ -52,6 +61,10 @@ class Presentation:
     def labels(self) -> list[str]:
         return [position_label(l) for l in self.lateral_positions]
 
+    def read(self, readout) -> np.ndarray:  # type: ignore[no-untyped-def]
+        """(B, r) s as ``readout`` (a :class:`parallax.readouts.PanReadout`) reads it."""
+        return self.pans if self.trials is None else readout.read(*self.trials)
+
 
 class Tally:
     """What one presentation reports (:class:`Presentation`), gathered iteration by iteration."""
@@ -70,9 +83,10 @@ class Tally:
         # either side (each robot's last body offset, pan and α*), and the pursuit is tallied
         self.sweep = _SweepTally(robots, lateral) if continuous else None
         # on a chosen route the positions never visited keep NaN
-        blank = np.full(shape, np.nan) if routed else np.zeros(shape)
-        self.pans, self.targets, self.start_pans = blank.copy(), blank.copy(), blank.copy()
-        self.best_pans, self.best_rewards = blank.copy(), np.full(shape, -np.inf)
+        unseen = np.nan if routed else 0.0
+        self.pans, self.targets, self.start_pans = (np.full(shape, unseen) for _ in range(3))
+        every = (*shape, trial_length)
+        self.trials = Trials(np.full(every, unseen), np.full(every, np.nan))
         self.routed, self.visited, self.position = routed, [], 0  # the positions of L visited
         self.observations: list[Observation | None] = [None] * robots  # each robot's latest
         # sums over robots and iterations, and the robot-encodings they add up
@@ -116,13 +130,8 @@ class Tally:
             return
         if iteration == 0:
             self.start_pans[robots, p] = pans
-        best = self.best_rewards[robots, p]
-        better = rewards > best  # ties keep the earlier pan
-        best[better] = rewards[better]
-        self.best_rewards[robots, p] = best
-        best_pans = self.best_pans[robots, p]
-        best_pans[better] = pans[better]
-        self.best_pans[robots, p] = best_pans
+        self.trials.pans[robots, p, iteration] = pans
+        self.trials.rewards[robots, p, iteration] = rewards
         if iteration == self.trial_length - 1:  # q_p, and α* there
             self.pans[robots, p] = pans
             self.targets[robots, p] = [o.target_pan for o in obs]
@@ -142,7 +151,7 @@ class Tally:
             lateral_positions=self.lateral,
             pans=self.pans,
             targets=self.targets,
-            best_pans=self.pans if self.sweep is not None else self.best_pans,
+            trials=None if self.sweep is not None else self.trials,
             distances=np.array([o.distance for o in obs] if obs else [np.nan] * robots),
             textures=np.array([o.texture_index for o in obs] if obs else [-1] * robots),
             steps=self.encodings // robots,

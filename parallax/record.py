@@ -87,8 +87,9 @@ class PresentationRecord:
     # parallax-replay can re-run the distance learner alone with another y, c or weighting.
     pans: list
     distances: list
-    # each trial's pan where the coder's reward peaked (train.distance_readout=best_reward)
-    best_pans: list
+    # s as each pan readout beyond the paper's reads it (parallax.readouts), by the readout's
+    # key (best_pans: each trial's pan where the coder's reward peaked), for parallax-replay
+    readouts: Mapping[str, list]
     # where each trial started (the paper: 0), and whether it was drawn from the jitter
     start_pans: list
     start_jitter: bool
@@ -117,7 +118,7 @@ class PresentationRecord:
             "distance_error": self.distance_error,
             "pans": self.pans,
             "distances": self.distances,
-            "best_pans": self.best_pans,
+            **self.readouts,
             "start_pans": self.start_pans,
             "start_jitter": self.start_jitter,
             "learnt_distance": self.learnt_distance,

@@ -21,6 +21,7 @@ run with :class:`parallax.health.Diverged`.
 
 from __future__ import annotations
 
+import functools
 import json
 import time
 from pathlib import Path
@@ -31,14 +32,10 @@ from omegaconf import DictConfig, OmegaConf
 from parallax import checkpoint
 from parallax.compressed import read_record, record_file, record_forms
 from parallax.config import (
-    READOUT_PANS,
     RUN_CONFIG_NAME,
-    distance_readout,
-    growth_start,
     perturbation_start,
     start_jitter_on,
 )
-from parallax.distance_step import distance_step
 from parallax.experiment import Experiment
 from parallax.health import DIVERGED_NAME, Diverged, Health
 from parallax.metrics import (
@@ -50,6 +47,7 @@ from parallax.metrics import (
 from parallax.panel import montage_picks, panel_frames, pictured_count, watched
 from parallax.parts import Parts
 from parallax.presentation import Presentation
+from parallax.readouts import READOUTS, of_run
 from parallax.record import PresentationRecord
 from parallax.routes import movement
 from parallax.run_folder import remove_leftovers, write_atomic
@@ -83,8 +81,10 @@ class Trainer:
         if int(cfg.train.threads) > 0:
             torch.set_num_threads(int(cfg.train.threads))
         self.exp = Experiment(cfg, parts=parts)
-        self.learn_distance = distance_step(self.exp.parts)
-        self.movement = movement(cfg, self.exp.parts)
+        # where the distance learner's targets come from, and its step after a sweep
+        self.targets = self.exp.distance.target_source
+        self.readout = of_run(cfg)  # which pan of each trial s holds
+        self.movement = movement(cfg, self.exp.parts, self.readout)
         self.eye = EyeMovementTracker(
             self.exp.lateral_positions, window=int(cfg.metrics.mae_window)
         )
@@ -95,7 +95,6 @@ class Trainer:
         self.before_perturbation: dict | None = None
         self.last_distance_stats: dict[str, float] = {}
         self.perturbation_start = perturbation_start(cfg)
-        self.growth_start = growth_start(cfg)
         self.health = Health(cfg.train.critic_scale_warning, cfg.train.stop_after_non_finite)
         self.distance_fitted = False  # whether the distance learner fitted in this presentation
         # A run resumed from checkpoint_previous.pt keeps it as the previous one: the latest
@@ -231,8 +230,11 @@ class Trainer:
         learnt_distance, walked = self.exp.on_final_list, None
         self.distance_fitted = False
         if learnt_distance and pres.route is None:
-            pans = getattr(pres, READOUT_PANS[distance_readout(self.cfg)])
-            stats, walked = self.learn_distance(pans, pres.distances, self.dist)
+            pans = pres.read(self.readout)
+            parts = self.exp.parts
+            stats, walked = self.targets.learn(
+                parts.distance, self.dist, pans, pres.distances, parts
+            )
             self.last_distance_stats = stats or self.last_distance_stats
             self.distance_fitted = bool(stats.get("trained"))
         moved = self.movement.after(pres, learnt_distance)
@@ -258,7 +260,7 @@ class Trainer:
             distance_error=self.dist.by_range(),
             pans=pres.pans.tolist(),
             distances=pres.distances.tolist(),
-            best_pans=pres.best_pans.tolist(),
+            readouts={r.key: pres.read(r).tolist() for r in READOUTS.values() if not r.paper},
             start_pans=pres.start_pans.tolist(),
             start_jitter=jittered,
             learnt_distance=learnt_distance,
@@ -278,10 +280,6 @@ class Trainer:
         mae = self.eye.mae_per_position()
         if enough and all(mae[k] <= float(cur.advance_below_deg) for k in stage):
             self.exp.set_stage(self.exp.stage + 1)
-
-    @property
-    def grown(self) -> bool:
-        return self.growth_start is not None and self.presentation >= self.growth_start
 
     @property
     def perturbed(self) -> bool:
@@ -359,9 +357,9 @@ class Trainer:
 
     def _panel(self, watch: Watch, pres: Presentation) -> list:
         """The frames of robot 0's presentation (parallax.panel), small for TensorBoard."""
-        readout = distance_readout(self.cfg)
         title = f"presentation {self.presentation}: panel at {pres.distances[0]:.1f} m"
-        shown = watched(watch, pres, self.exp.parts, readout, title, self.learn_distance.truths)
+        truths = functools.partial(self.targets.truths, bodies=self.exp.parts)
+        shown = watched(watch, pres, self.exp.parts, self.readout, title, truths)
         # without a video writer TensorBoard gets a montage of four frames: draw only those
         picks = None if can_write_video() else montage_picks(pictured_count(shown))
         return list(panel_frames(shown, width=PANEL_WIDTH, picks=picks))
@@ -384,20 +382,20 @@ class Trainer:
         write_atomic(self.run_dir / RUN_CONFIG_NAME, config)
         if self.perturbed:
             self.exp.set_perturbation(True)
-        self.exp.set_growth(self.grown)
+        self.exp.at_presentation(self.presentation)  # the bodies as they are by now
         self.health.skipped_seen = self.skipped_updates()
         return resumed
 
     def _switch_schedule(self) -> None:
         """§5's perturbation (the learnt state just before it kept for parallax-eval
-        --checkpoint) and the body's growth, at their presentations."""
+        --checkpoint) at its presentation, and the bodies as they are at this one."""
         if self.presentation == self.perturbation_start:
             self.before_perturbation = self.metrics_summary()
             path = self.run_dir / checkpoint.BEFORE_PERTURBATION_NAME
             checkpoint.save_atomic(self.state_dict(), path)
             self.exp.set_perturbation(True)
-        if self.presentation == self.growth_start:
-            self.exp.set_growth(True)  # the body's stride grows; the robot's belief does not
+        # a growth spurt: the body's stride grows; the robot's belief does not
+        self.exp.at_presentation(self.presentation)
 
 
 def _presentation_of(line: str) -> float:

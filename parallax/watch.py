@@ -22,11 +22,11 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from parallax.config import READOUT_PANS
 from parallax.envs.observation import Observation
 from parallax.envs.walk import Walker
 from parallax.parts import Parts
 from parallax.presentation import Presentation
+from parallax.readouts import PanReadout
 
 #: Size (width, height) of the side camera's image in pixels.
 SIDE_SIZE = (720, 360)
@@ -166,13 +166,13 @@ class Watch:
 
 
 def read_distance(
-    parts: Parts, pres: Presentation, readout: str, truths: Any = None
+    parts: Parts, pres: Presentation, readout: type[PanReadout], truths: Any = None
 ) -> tuple[float, float] | None:
     """Robot 0's distance read from the presentation's s (a planned route: the planner's
     estimate from the positions it visited) and the truth it is scored against (``truths``, a
-    :func:`parallax.distance_step.distance_step`'s ``truths``; default: the panel's distance);
+    target source's ``truths`` (parallax.distance.targets); default: the panel's distance);
     None while the learner that would read it has not learnt yet."""
-    pans = getattr(pres, READOUT_PANS[readout])[0]
+    pans = pres.read(readout)[0]
     distance = float(pres.distances[0])
     truth = distance if truths is None else float(np.asarray(truths([distance])).reshape(-1)[0])
     if pres.route is not None:

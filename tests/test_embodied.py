@@ -14,8 +14,7 @@ from pathlib import Path
 import pytest
 
 from parallax import checkpoint
-from parallax.config import changed_settings, compose, load_run_config, validate
-from parallax.config.errors import ConfigError
+from parallax.config import ConfigError, changed_settings, compose, load_run_config, validate
 from parallax.distance import distance_error_by_range
 from parallax.metrics import finite_or_none
 from parallax.tools.replay import ReplayError, main, parse_sweep, replay

@@ -14,6 +14,7 @@ from parallax import lockstep, loop
 from parallax.config import compose
 from parallax.executor import InOrder
 from parallax.experiment import Experiment
+from parallax.readouts import READOUTS
 from parallax.routes import Chosen
 
 
@@ -50,8 +51,10 @@ def _assert_same_states(first: dict, second: dict) -> None:
 
 
 def _assert_same_presentation(a, b) -> None:
-    for field in ("pans", "best_pans", "targets", "start_pans", "distances", "textures"):
+    for field in ("pans", "targets", "start_pans", "distances", "textures"):
         np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=field)
+    for readout in READOUTS.values():
+        np.testing.assert_array_equal(a.read(readout), b.read(readout), err_msg=readout.name)
     assert a.reward == b.reward and a.errors == b.errors and a.policy_stats == b.policy_stats
     assert a.steps == b.steps and a.route == b.route
 

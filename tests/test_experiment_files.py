@@ -44,6 +44,7 @@ def test_every_setup_has_every_family_and_nothing_else():
         [f"{family}_{s}" for family in FAMILIES for s in SETUPS]
         + ["paper_algorithm", "unsourced_algorithm", "quickstart"]
         + ["embodied_multi_5_20_weighted", "embodied_growth", "planned_multi_5_20_weighted"]
+        + ["geometric_multi_5_20_weighted"]
         + [CONTINUOUS]
         + ["sensitivity_single_5", "sensitivity_multi_5_10"]
         + [f"without_{improvement}" for improvement in WITHOUT]

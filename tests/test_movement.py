@@ -23,6 +23,8 @@ from parallax.distance.planner import MovementPlanner
 from parallax.experiment import Experiment
 from parallax.metrics import DistanceErrorTracker, finite_or_none, position_label
 from parallax.parts import seeds_for
+from parallax.readouts import READOUTS
+from parallax.readouts.best_reward import BestReward
 from parallax.routes import SWEEP, Chosen, planned_route
 from tests.conftest import TINY, train_tiny_run
 
@@ -288,10 +290,14 @@ def test_a_greedy_route_sees_the_pans_of_the_full_sweep(learnt, order, texture, 
     sweep = _frozen(exp, state, texture, distance)
     routed = _frozen(exp, state, texture, distance, _scripted(order))
     assert routed.route == order and sweep.route is None
-    assert np.isfinite(sweep.pans).all() and np.ptp(sweep.best_pans) > 0  # the eye moved
-    for key in ("pans", "best_pans", "targets", "start_pans"):
+    assert np.isfinite(sweep.pans).all() and np.ptp(sweep.read(BestReward)) > 0  # it moved
+    for key in ("pans", "targets", "start_pans"):
         np.testing.assert_array_equal(
             getattr(routed, key)[0, order], getattr(sweep, key)[0, order], err_msg=key
+        )
+    for readout in READOUTS.values():
+        np.testing.assert_array_equal(
+            routed.read(readout)[0, order], sweep.read(readout)[0, order], err_msg=readout.name
         )
     assert routed.distances.tolist() == sweep.distances.tolist() == [distance]
 
@@ -306,7 +312,7 @@ def test_a_reversed_route_sees_the_pans_of_the_sweep_everywhere(learnt):
         routed = _frozen(exp, state, texture, distance, _scripted(order))
         assert routed.route == order
         np.testing.assert_array_equal(routed.pans, sweep.pans)
-        np.testing.assert_array_equal(routed.best_pans, sweep.best_pans)
+        np.testing.assert_array_equal(routed.read(BestReward), sweep.read(BestReward))
 
 
 def test_a_frozen_presentation_leaves_the_policy_as_it_was(learnt):
@@ -437,10 +443,10 @@ def _routes_run(run_dir: Path, jittered: bool) -> tuple[list, dict]:
         routes, estimates = [], []
         for i, d in enumerate(EVAL_DISTANCES):
             exp.envs[0].task.set_next_stimulus(texture_index=i % textures, distance=d)
-            route = planned_route(exp.planner, "best_pans")
+            route = planned_route(exp.planner, BestReward)
             pres = exp.run_presentation(learn=False, greedy=True, route=route)
             routes.append(pres.route)
-            estimates.append(exp.planner.estimate(pres.route, pres.best_pans[0, pres.route]))
+            estimates.append(exp.planner.estimate(pres.route, pres.read(BestReward)[0, pres.route]))
     finally:
         exp.close()
     return routes, distance_error_by_range(estimates, EVAL_DISTANCES)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from parallax.presentation import Tally
+from parallax.readouts.best_reward import BestReward
 from tests.scripted import IMAGE, frames
 
 LATERAL = [0.05, 0.1]
@@ -31,7 +32,7 @@ def test_q_p_is_the_pan_at_each_trials_last_iteration_and_the_start_pan_at_its_f
     np.testing.assert_array_equal(pres.start_pans, [[0.0, 1.0], [0.1, 1.1]])
     np.testing.assert_array_equal(pres.targets, np.ones((2, 2)))  # scripted α*
     # the best-coded image's pan; a tie keeps the earlier pan
-    np.testing.assert_array_equal(pres.best_pans, [[0.4, 1.0], [0.3, 1.1]])
+    np.testing.assert_array_equal(pres.read(BestReward), [[0.4, 1.0], [0.3, 1.1]])
     assert pres.steps == 2 * TRIAL and pres.route is None
     assert pres.reward == pytest.approx(np.mean([-3, -3, -2, -1, -1, -2, -1, -1, -1, -2, -1, -3]))
     assert pres.distances.tolist() == [5.0, 5.0] and pres.textures.tolist() == [0, 0]
@@ -53,7 +54,7 @@ def test_a_chosen_route_records_its_positions_and_nan_elsewhere():
     _trial(tally, 1, [[0.0], [0.1], [0.2]], [[-1], [-1], [-1]])
     pres = tally.so_far()
     assert pres.route == [1] and pres.pans[0, 1] == 0.2
-    assert np.isnan(pres.pans[0, [0, 2]]).all() and np.isnan(pres.best_pans[0, [0, 2]]).all()
+    assert np.isnan(pres.pans[0, [0, 2]]).all() and np.isnan(pres.read(BestReward)[0, [0, 2]]).all()
 
 
 def test_the_record_keeps_the_view_and_the_policys_statistics_when_asked():

@@ -15,6 +15,7 @@ import pytest
 import torch
 
 from parallax.config import compose
+from parallax.readouts.best_reward import BestReward
 from parallax.trainer import Trainer
 
 
@@ -326,7 +327,7 @@ def test_eval_writes_json_and_figures(tmp_path, tiny_overrides):
 
 
 def test_best_pans_are_the_pans_where_the_reward_peaked(tmp_path, tiny_overrides, monkeypatch):
-    # Presentation.best_pans (beyond the paper): per trial, the pan of the image with the highest
+    # the best_reward readout (beyond the paper): per trial, the pan of the image with the highest
     # reward −(eC + eF), the earliest on ties; the paper's q_p (pans) is the last pan.
     cfg = compose(tiny_overrides + ["env.initial_pan_jitter_deg=1"])
     trainer = Trainer(cfg, tmp_path)
@@ -363,7 +364,7 @@ def test_best_pans_are_the_pans_where_the_reward_peaked(tmp_path, tiny_overrides
         trial = [(pan, reward) for l, pan, reward in seen if l == round(lateral, 6)]
         assert len(trial) == 4  # env.trial_length
         expected = max(trial, key=lambda pr: pr[1])[0]  # max() keeps the first on ties
-        assert pres.best_pans[0, p] == pytest.approx(expected, abs=1e-9)
+        assert pres.read(BestReward)[0, p] == pytest.approx(expected, abs=1e-9)
         assert pres.pans[0, p] == pytest.approx(trial[-1][0], abs=1e-9)
 
 

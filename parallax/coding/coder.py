@@ -23,7 +23,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from parallax.config.schema import CoderConfig, default
+from parallax.checks import default
+from parallax.coding.settings import CoderConfig
 
 from . import native
 from .atoms import atom_grid

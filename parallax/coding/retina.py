@@ -42,8 +42,6 @@ GRAY_WEIGHTS = (0.299, 0.587, 0.114)
 #: 8-bit image (1/255 ≈ 4e-3 relative).
 NEAR_CONSTANT_TOLERANCE = 1e-5
 
-#: The choices of coder.normalisation (checked by parallax.config).
-NORMALISATIONS = ("per_half", "joint")
 
 _BINOMIAL_5 = (1.0, 4.0, 6.0, 4.0, 1.0)
 

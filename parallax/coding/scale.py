@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from parallax.config.schema import CoderConfig
+from parallax.coding.settings import CoderConfig
 
 from . import native
 from .dictionary import (

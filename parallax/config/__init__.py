@@ -2,26 +2,25 @@
 
 ``schema``    every setting as a typed dataclass field with its one default (registered in
               Hydra's ConfigStore on import; conf/ files extend it)
-``validate``  ranges and cross-field rules, checked before anything is written
+``validate``  every part's ranges and cross-field rules, checked before anything is written
 ``plumbing``  composing, run-directory names, reading a run's saved config back (in this
               parallax's words: ``upgrade_saved``), comparing two
-``errors``    ConfigError, the one-line ``key=value: reason`` error
+Each part's settings and checks are in its ``settings.py`` (parallax.envs, parallax.coding,
+parallax.policy, parallax.distance), the one-line ``key=value: reason`` ConfigError in
+parallax.checks, below them all; this package gathers them and imports nothing above them.
 """
 
-from parallax.config.errors import ConfigError, format_value
+from parallax.checks import ConfigError, format_value
 from parallax.config.plumbing import (
     CONFIG_MODULE,
     CONFIG_NAME,
-    DISTANCE_READOUTS,
     MAX_RUN_NAME,
     OPAQUE_KEYS,
-    READOUT_PANS,
     RESULT_NEUTRAL_KEYS,
     RESUMABLE_CHANGES,
     RUN_CONFIG_NAME,
     changed_settings,
     compose,
-    distance_readout,
     flatten,
     freeze_value,
     growth_start,
@@ -55,10 +54,8 @@ register()
 __all__ = [
     "CONFIG_MODULE",
     "CONFIG_NAME",
-    "DISTANCE_READOUTS",
     "MAX_RUN_NAME",
     "OPAQUE_KEYS",
-    "READOUT_PANS",
     "RESULT_NEUTRAL_KEYS",
     "RESUMABLE_CHANGES",
     "ROBOT_UPDATES",
@@ -77,7 +74,6 @@ __all__ = [
     "changed_settings",
     "compose",
     "default",
-    "distance_readout",
     "growth_start",
     "flatten",
     "format_value",

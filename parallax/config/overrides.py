@@ -12,7 +12,7 @@ from hydra.errors import HydraException
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
-from parallax.config.errors import ConfigError
+from parallax.checks import ConfigError
 from parallax.config.plumbing import closest_key, compose, without_hydra
 from parallax.config.schema import SCHEMA_NODE
 from parallax.config.validate import validate

@@ -1,8 +1,8 @@
 """Hydra plumbing for the apps: composing the configuration, naming run directories, reading a
 run's saved configuration back and comparing it with another one.
 
-The settings themselves are in :mod:`parallax.config.schema`; their checks in
-:mod:`parallax.config.validate`.
+The settings themselves are in :mod:`parallax.config.schema` (each part's in its
+``settings.py``, beside their checks); :mod:`parallax.config.validate` runs the checks.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from parallax.config.schema import Config, SweepConfig, register
+from parallax.envs.settings import growth_start
 
 #: The Hydra config package; ``conf/`` ships inside the installed package as ``parallax.conf``.
 CONFIG_MODULE = "parallax.conf"
@@ -143,6 +144,7 @@ ADDED_SETTINGS = {
     ("distance", "warm_start"): True,
     ("distance", "keep_first_scaling"): False,
     ("env", "fovea_px"): None,  # every pixel rendered at full resolution
+    ("distance", "estimator"): "network",
 }
 
 
@@ -288,28 +290,6 @@ def perturbation_start(cfg) -> int | None:
     if fraction is None or total is None:
         return None
     return int(round(float(fraction) * int(total)))
-
-
-def growth_start(cfg) -> int | None:
-    """Presentation index from which the body's grown stride is used (None: never): the one place
-    ``env.walk.growth_start_fraction`` becomes a presentation (the trainer and parallax-replay)."""
-    fraction = cfg["env"]["walk"]["growth_start_fraction"]  # a DictConfig or a plain dict
-    if fraction is None:
-        return None
-    return int(round(float(fraction) * int(cfg["train"]["presentations"])))
-
-
-#: How a trial's pan becomes a component of s: "last", the pan at its last iteration (the paper's
-#: q_p, eq. 16); "best_reward" (beyond the paper), the pan whose image the coder encoded best
-#: during the trial. The trainer, parallax-replay and parallax-eval share these names.
-#: Each readout names the Presentation field and the metrics.jsonl key that hold its pans.
-READOUT_PANS = {"last": "pans", "best_reward": "best_pans"}
-DISTANCE_READOUTS = tuple(READOUT_PANS)
-
-
-def distance_readout(cfg) -> str:
-    """The run's ``train.distance_readout`` (``cfg``: a DictConfig or a plain dict)."""
-    return str(cfg["train"]["distance_readout"])
 
 
 def start_jitter_on(cfg, presentation: int) -> bool:

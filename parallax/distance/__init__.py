@@ -15,7 +15,6 @@ from parallax.distance.targets import (
     OdometryTargets,
     SupervisorTargets,
     TargetSource,
-    register_target_source,
 )
 from parallax.distance.weighting import position_weights, sensitive_positions
 
@@ -32,6 +31,5 @@ __all__ = [
     "TargetSource",
     "distance_error_by_range",
     "position_weights",
-    "register_target_source",
     "sensitive_positions",
 ]

@@ -26,18 +26,21 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from parallax.config.schema import DistanceConfig, default
+from parallax.checks import default
+from parallax.distance.estimators import ESTIMATORS
 from parallax.distance.levenberg_marquardt import LevenbergMarquardt
 from parallax.distance.metrics import distance_error_by_range
 from parallax.distance.network import DistanceMLP
 from parallax.distance.queue_memory import QueueMemory
+from parallax.distance.settings import DistanceConfig
 from parallax.distance.targets import TargetSource, make_target_source
 from parallax.distance.weighting import position_weights, sensitive_positions
 
 STATE_VERSION = 1
 
 
-def _regression_residuals(forward, inputs: Tensor, targets: Tensor) -> Tensor:  # type: ignore[no-untyped-def]
+def regression_residuals(forward, inputs: Tensor, targets: Tensor) -> Tensor:  # type: ignore[no-untyped-def]
+    """The network's errors on a batch, the residuals Levenberg–Marquardt minimises (eq. 15)."""
     return forward(inputs) - targets
 
 
@@ -67,6 +70,7 @@ class DistanceLearner:
         reset_mu: bool = DistanceConfig.reset_mu,
         warm_start: bool = DistanceConfig.warm_start,
         keep_first_scaling: bool = DistanceConfig.keep_first_scaling,
+        estimator: str = DistanceConfig.estimator,
     ) -> None:
         """The settings are distance.*'s (parallax.config checks them); ``sensitivity``, ``lm``
         and ``odometry`` may give only some of their node's settings, the others keep the
@@ -99,6 +103,8 @@ class DistanceLearner:
         self.init_generator = torch.Generator().manual_seed(int(seed) + 2)
         self.fits = 0
         self.observations = 0
+        # what reads a distance from s: the network, or another estimator of the same queue
+        self.estimator = ESTIMATORS[estimator](self)
 
     @property
     def is_ready(self) -> bool:
@@ -207,11 +213,11 @@ class DistanceLearner:
 
                 def validation() -> float:
                     with torch.no_grad():
-                        errors = _regression_residuals(self.network, check_inputs, check_targets)
+                        errors = regression_residuals(self.network, check_inputs, check_targets)
                     return float(errors.square().sum())
 
         result = self.optimizer.run(
-            _regression_residuals,
+            regression_residuals,
             fit_inputs,
             fit_targets,
             epochs=epochs,
@@ -227,7 +233,7 @@ class DistanceLearner:
             # result.sse holds λ‖w‖² too, or covers the training rows only: report the data's
             # error over the whole queue
             with torch.no_grad():
-                mse = float(_regression_residuals(self.network, weighted, targets).square().mean())
+                mse = float(regression_residuals(self.network, weighted, targets).square().mean())
         return dict(
             trained=1.0,
             loss=mse,
@@ -242,7 +248,8 @@ class DistanceLearner:
         )
 
     def predict(self, S: Tensor | np.ndarray | Sequence[Sequence[float]]) -> Tensor | np.ndarray:
-        """(n, r) pans in degrees → (n,) metres (or (r,) → a scalar), weighted as in training.
+        """(n, r) pans in degrees → (n,) metres (or (r,) → a scalar), as the run's estimator
+        (distance.estimator) reads them.
 
         Returns a float64 tensor for a tensor input, a NumPy array otherwise.
         """
@@ -251,9 +258,7 @@ class DistanceLearner:
                 f"distance learner is not ready (queue {self.queue.fill}/{self.queue.capacity}, "
                 f"{self.fits} fits); check is_ready before predict"
             )
-        inputs = self._as_inputs(S)
-        with torch.no_grad():
-            distances = self.network(inputs * self.weights)
+        distances = self.estimator.predict(self._as_inputs(S))
         return distances.to(S.device) if isinstance(S, Tensor) else distances.cpu().numpy()
 
     def queue_error(self) -> dict[str, float]:

@@ -32,7 +32,7 @@ import torch
 from torch import Tensor, nn
 from torch.func import functional_call, jacrev, vmap
 
-from parallax.config.schema import LevenbergMarquardtConfig
+from parallax.distance.settings import LevenbergMarquardtConfig
 
 #: ``closure(forward, *batch)`` returns the residual tensor (any shape; it is flattened).
 ResidualClosure = Callable[..., Tensor]
@@ -109,21 +109,24 @@ class LevenbergMarquardt:
             )
 
     # -- parameters as one flat vector ------------------------------------------------------
-    def _flat(self) -> Tensor:
+    def flat_parameters(self) -> Tensor:
+        """The trainable parameters as one flat vector (a copy)."""
         return torch.cat([p.detach().reshape(-1) for p in self._params])
 
     def _unflatten(self, flat: Tensor) -> dict[str, Tensor]:
         parts = flat.split([p.numel() for p in self._params])
         return {name: part.view(p.shape) for name, part, p in zip(self._names, parts, self._params)}
 
-    def _write(self, flat: Tensor) -> None:
+    def set_flat_parameters(self, flat: Tensor) -> None:
+        """Write the flat vector ``flat`` into the model's trainable parameters."""
         with torch.no_grad():
             for param, value in zip(self._params, self._unflatten(flat).values()):
                 param.copy_(value)
 
-    def _residuals(
+    def residuals(
         self, flat: Tensor, closure: ResidualClosure, batch: tuple[Tensor, ...]
     ) -> Tensor:
+        """``closure``'s residuals on ``batch`` with the parameters ``flat``, as one vector."""
         params = self._unflatten(flat)
 
         def forward(*args: object, **kwargs: object) -> Tensor:
@@ -131,25 +134,20 @@ class LevenbergMarquardt:
 
         return closure(forward, *batch).reshape(-1)
 
-    def _objective(self, errors: Tensor, flat: Tensor) -> float:
+    def objective(self, errors: Tensor, flat: Tensor) -> float:
         """Σe² + λ‖w‖² in float64 for the residuals ``errors`` at the parameters ``flat``."""
         sse = errors.double().square().sum()
         if self.weight_decay:
             sse = sse + self.weight_decay * flat.double().square().sum()
         return float(sse)
 
-    def _jacobian(
-        self,
-        flat: Tensor,
-        closure: ResidualClosure,
-        batch: tuple[Tensor, ...],
-        per_sample: bool,
-        jacobian: JacobianFunction | None,
+    def jacobian(
+        self, flat: Tensor, closure: ResidualClosure, batch: tuple[Tensor, ...], per_sample: bool
     ) -> Tensor:
-        if jacobian is not None:
-            return jacobian(*batch)
+        """The residuals' Jacobian at ``flat`` (residuals × parameters) by autograd;
+        ``per_sample``: one sample at a time, for residuals that each depend on one sample only."""
         if not per_sample:
-            return jacrev(lambda f: self._residuals(f, closure, batch))(flat)
+            return jacrev(lambda f: self.residuals(f, closure, batch))(flat)
 
         def one_sample(f: Tensor, *sample: Tensor) -> Tensor:
             params = self._unflatten(f)
@@ -177,12 +175,12 @@ class LevenbergMarquardt:
                 "per_sample=True needs batch tensors that share their first dimension, "
                 f"got shapes {[tuple(t.shape) for t in batch]}"
             )
-        flat = self._flat()
+        flat = self.flat_parameters()
         with torch.no_grad():
-            residuals = self._residuals(flat, closure, batch)
+            residuals = self.residuals(flat, closure, batch)
         if not bool(torch.isfinite(residuals).all()):
             raise ValueError("residuals at the current parameters are not finite; check the data")
-        sse = self._objective(residuals, flat)
+        sse = self.objective(residuals, flat)
         if self.mu > self.mu_max:
             return LMStepResult(False, sse, math.nan, self.mu, "mu_max")
         jacobian_elements = residuals.numel() * self.num_params
@@ -193,7 +191,11 @@ class LevenbergMarquardt:
                 f"max_jacobian_elements={self.max_jacobian_elements}"
             )
 
-        jacobian = self._jacobian(flat, closure, batch, per_sample, jacobian).double()
+        if jacobian is None:  # autograd's
+            matrix = self.jacobian(flat, closure, batch, per_sample)
+        else:  # the model's own
+            matrix = jacobian(*batch)
+        jacobian = matrix.double()
         errors = residuals.double()
         gradient = jacobian.T @ errors
         weights = flat.double()
@@ -205,16 +207,16 @@ class LevenbergMarquardt:
         if grad_norm < self.min_grad:
             return LMStepResult(False, sse, grad_norm, self.mu, "min_grad")
 
-        solve = _DampedSolver(jacobian, errors, gradient, self.weight_decay, weights)
+        solve = DampedSolver(jacobian, errors, gradient, self.weight_decay, weights)
         while self.mu <= self.mu_max:
             delta = solve(self.mu)
             if delta is not None:
                 candidate = flat + delta.to(flat.dtype)
                 with torch.no_grad():
-                    candidate_residuals = self._residuals(candidate, closure, batch)
-                candidate_sse = self._objective(candidate_residuals, candidate)
+                    candidate_residuals = self.residuals(candidate, closure, batch)
+                candidate_sse = self.objective(candidate_residuals, candidate)
                 if math.isfinite(candidate_sse) and candidate_sse < sse:
-                    self._write(candidate)
+                    self.set_flat_parameters(candidate)
                     self.mu = max(self.mu * self.mu_decrease, MU_FLOOR)
                     return LMStepResult(True, candidate_sse, grad_norm, self.mu, "")
             self.mu *= self.mu_increase
@@ -244,14 +246,14 @@ class LevenbergMarquardt:
         accepted = 0
         result = None
         if validation is not None:
-            best_error, best_flat, fails = validation(), self._flat(), 0
+            best_error, best_flat, fails = validation(), self.flat_parameters(), 0
         for _ in range(int(epochs)):
             result = self.step(closure, *batch, per_sample=per_sample, jacobian=jacobian)
             accepted += int(result.accepted)
             if validation is not None and result.accepted:
                 error = validation()
                 if error < best_error:
-                    best_error, best_flat, fails = error, self._flat(), 0
+                    best_error, best_flat, fails = error, self.flat_parameters(), 0
                 elif error > best_error:
                     fails += 1
                 if fails >= max_fail:
@@ -260,7 +262,7 @@ class LevenbergMarquardt:
                 break
         assert result is not None
         if validation is not None:
-            self._write(best_flat)
+            self.set_flat_parameters(best_flat)
         return LMRunResult(accepted, result.sse, result.grad_norm, self.mu, result.stop)
 
     def state_dict(self) -> dict[str, float]:
@@ -273,7 +275,7 @@ class LevenbergMarquardt:
         self.mu = mu
 
 
-class _DampedSolver:
+class DampedSolver:
     """Solves (JᵀJ + (λ + μ)I)Δ = −g, g = Jᵀe + λw, for successive μ, factorising the smaller
     Gram matrix (λ = ``decay``, w = ``weights``; λ = 0: the plain step −(JᵀJ + μI)⁻¹Jᵀe).
 

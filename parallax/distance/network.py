@@ -24,10 +24,7 @@ import math
 import torch
 from torch import Tensor, nn
 
-from parallax.config.schema import DistanceConfig
-
-#: The choices of distance.input_scaling (checked by parallax.config).
-INPUT_SCALINGS = ("global", "per_input", "none")
+from parallax.distance.settings import DistanceConfig
 
 
 def minmax_gain_offset(values: Tensor, dim: int | None) -> tuple[Tensor, Tensor]:

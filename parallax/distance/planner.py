@@ -8,10 +8,9 @@ position, §3.2), so the robot may visit any subset V of L, in any order.
 The planner is derived from the robot's own confidence, not learnt by trial and error. It keeps
 the last ``queue_size`` complete vectors s from full sweeps, each with its target distance. For
 any subset V it fits an estimator of the distance from the pans at V: a weighted least-squares
-fit of the inverse distance on those pans. A pan is close to atan(l/d) and small, so it is
-nearly proportional to 1/d; weighting each row by d² makes the fit minimise the relative error,
-the measure of Tables 4–5. The fit's leave-one-out errors on the queue, on rows estimated near
-the current estimate, are the expected error of V.
+fit of the inverse distance on those pans (:mod:`parallax.distance.inverse_distance`). The
+fit's leave-one-out errors on the queue, on rows estimated near the current estimate, are the
+expected error of V.
 
 After each position, with the estimate d̂ from the positions visited so far, the robot weighs
 each position it has not visited: the expected error of V ∪ {k} near d̂, plus the price of the
@@ -26,24 +25,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
-from parallax.config.schema import DistanceConfig, MovementConfig
+from parallax.distance.inverse_distance import InverseDistanceFit as Fit
+from parallax.distance.inverse_distance import fit_inverse_distance
+from parallax.distance.settings import DistanceConfig, MovementConfig
 
 #: Edges (m) of the distance bins the expected error is conditioned on; the grid is 3–10 m.
 BIN_EDGES_M = (4.0, 5.0, 6.5, 8.0)
-
-
-@dataclass(frozen=True)
-class Fit:
-    """One subset's estimator: weights on [pans, 1] for the inverse distance, and its
-    leave-one-out estimates and relative errors (%) on the queue's rows."""
-
-    weights: np.ndarray
-    loo_estimates: np.ndarray
-    loo_errors_pct: np.ndarray
 
 
 class MovementPlanner:
@@ -99,17 +89,7 @@ class MovementPlanner:
         return self._fits[key]
 
     def _fit(self, key: tuple[int, ...]) -> Fit:
-        x = np.concatenate([self.inputs[:, list(key)], np.ones((self.distances.size, 1))], axis=1)
-        y, w = 1.0 / self.distances, self.distances**2
-        gram = x.T @ (x * w[:, None]) + self.ridge * np.eye(x.shape[1])
-        inverse = np.linalg.inv(gram)
-        weights = inverse @ (x.T @ (w * y))
-        # leave-one-out residuals of weighted least squares: e_i / (1 − h_ii)
-        leverage = np.einsum("ij,jk,ik->i", x, inverse, x) * w
-        residual = (y - x @ weights) / np.maximum(1.0 - leverage, 1e-9)
-        loo_inverse = np.maximum(y - residual, 1e-9)
-        loo = 1.0 / loo_inverse
-        return Fit(weights, loo, 100.0 * np.abs(loo - self.distances) / self.distances)
+        return fit_inverse_distance(self.inputs[:, list(key)], self.distances, self.ridge)
 
     def estimate(self, visited: Sequence[int], pans: Sequence[float]) -> float:
         """Distance (m) from the pans at ``visited``, in the same order."""

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from parallax.config.schema import SensitivityConfig
+from parallax.distance.settings import SensitivityConfig
 from parallax.geometry import FOCAL_LENGTH_PX, disparity_score, effective_patch_size
 
 CM_PER_M = 100.0

@@ -31,8 +31,13 @@ import mujoco
 import numpy as np
 from dm_control import mujoco as dm_mujoco
 
-from parallax.config.schema import PERIPHERY_SUBSAMPLE, DistanceGridConfig, EnvConfig
 from parallax.envs import rendering
+from parallax.envs.settings import (
+    PERIPHERY_SUBSAMPLE,
+    ROTATION_AXES,
+    DistanceGridConfig,
+    EnvConfig,
+)
 from parallax.envs.stimuli import StimulusSet, background_image
 from parallax.geometry import FOCAL_LENGTH_PX
 
@@ -47,12 +52,6 @@ EYE_HEIGHT_M = 0.607
 #: Side of the square stimulus panel (m): covers the 150×150 fine window at 10 m with room for a
 #: 20 cm lateral move at pan 0 (150/2 + 531·0.2/10 px ≈ 86 px from the centre; 1.65 m ≈ 88 px).
 PANEL_SIDE_M = 3.3
-#: Camera axes for the perturbation rotation, in the camera's frame (it looks along its −z).
-ROTATION_AXES = {
-    "optical": (0.0, 0.0, -1.0),
-    "horizontal": (1.0, 0.0, 0.0),
-    "vertical": (0.0, 1.0, 0.0),
-}
 #: Geom group of the marker disc at the panel centre (hidden from the eye unless asked for).
 MARKER_GROUP = 4
 #: Geom groups the side view adds to the eye's: the robot's body and the floor.

@@ -24,7 +24,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from parallax.config.schema import StimuliConfig
+from parallax.checks import Checks
+from parallax.envs.settings import SPLITS, StimuliConfig
 
 #: Photographs for training textures (names of ``skimage.data`` loaders; motorcycle = its left
 #: view).
@@ -45,12 +46,6 @@ HELDOUT_PHOTOS = ("gravel", "moon", "page", "text", "retina")
 #: The still background behind the panel; in neither split.
 BACKGROUND_PHOTO = "cell"
 
-#: The choices of env.stimuli.source, .split and .kind (checked by parallax.config).
-SOURCES = ("skimage", "dir", "procedural")
-SPLITS = ("train", "heldout")
-PROCEDURAL_KINDS = ("dead_leaves", "pink_noise")
-#: The texture sides the panel takes (texels).
-RESOLUTIONS = (8, 4096)
 DEFAULT_COUNT = {"train": 120, "heldout": 40}
 SETTING_KEYS = tuple(spec.name for spec in dataclasses.fields(StimuliConfig))
 
@@ -344,3 +339,12 @@ __all__ = [
     "BACKGROUND_PHOTO",
     "SETTING_KEYS",
 ]
+
+
+def check_loadable(check: Checks) -> None:
+    """Raise ConfigError for env.stimuli settings that give no textures (a folder without
+    readable images, …): the set is built here, once per process, as the run will build it."""
+    try:
+        load_stimuli(check.get("env.stimuli"))
+    except StimulusError as error:
+        check.fail(f"env.stimuli.{error.key}", error.value, error.reason)

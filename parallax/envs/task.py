@@ -28,8 +28,9 @@ from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
 
-from parallax.config.schema import EnvConfig, PerturbationConfig, default
+from parallax.checks import default
 from parallax.envs.hoap3 import Physics, check_distance
+from parallax.envs.settings import EnvConfig, PerturbationConfig
 from parallax.envs.stimuli import load_stimuli
 from parallax.envs.sweep import body_offsets, sweep_iterations
 from parallax.geometry import ACTION_SET_DEG
@@ -201,6 +202,15 @@ class LateralPursuitTask(base.Task):
             )
         step = float(check_lateral_positions([lateral_m])[0])
         self._episode_positions = (*self._episode_positions[: self._position_index + 1], step)
+
+    def random_state(self) -> tuple:
+        """Where the task's random stream stands (its stimuli, distances and start pans): a
+        checkpoint keeps it, and an evaluation that runs the same presentations twice puts it
+        back (:meth:`set_random_state`)."""
+        return self.random.get_state()
+
+    def set_random_state(self, state: tuple) -> None:
+        self.random.set_state(state)
 
     @property
     def start_jitter_enabled(self) -> bool:

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from parallax.config.schema import WalkConfig
 from parallax.envs.hoap3 import Physics
+from parallax.envs.settings import WalkConfig
 
 #: The body part that touches the panel, and the panel.
 HAND_GEOM = "hand_left"
@@ -45,8 +45,8 @@ class Walk:
 class Walker:
     """Walks one robot's body to the panel and back; its slip noise has its own random stream,
     so walking never changes what the eye sees or learns. The body is env.walk's (whose ranges
-    parallax.config checks); when a growth spurt comes is the trainer's schedule
-    (env.walk.growth_start_fraction), which sets ``grown``."""
+    parallax.config checks); from presentation ``growth_start`` on (env.walk.
+    growth_start_fraction of the run; None: never) its stride is grown (:meth:`at_presentation`)."""
 
     def __init__(
         self,
@@ -56,13 +56,20 @@ class Walker:
         stride_slip: float = WalkConfig.stride_slip,
         substeps: int = WalkConfig.substeps,
         growth_factor: float = WalkConfig.growth_factor,
+        growth_start: int | None = None,
     ) -> None:
         self.stride_m = float(stride_m)
         self.stride_slip = float(stride_slip)
         self.substeps = int(substeps)
         self.growth_factor = float(growth_factor)
+        self.growth_start = growth_start
         self.grown = False
         self.random = np.random.RandomState(int(seed) % 2**32)
+
+    def at_presentation(self, presentation: int) -> None:
+        """Presentation ``presentation`` (0-based) is next: the body grown from the growth
+        spurt's on, as it was before it."""
+        self.grown = self.growth_start is not None and presentation >= self.growth_start
 
     @property
     def true_stride_m(self) -> float:

@@ -7,9 +7,10 @@ the optional normalisations of θ. ``Pursuer`` is its bookkeeping in the loop: e
 step, θ(I0, I0), the rule at a trial's reset, learning and acting.
 """
 
-from parallax.policy.features import FEATURE_NORMS, FeatureNormalizer, PolicyInputs
+from parallax.policy.features import FeatureNormalizer, PolicyInputs
 from parallax.policy.natural_actor_critic import PAPER_ACTIONS_DEG, NaturalActorCritic
 from parallax.policy.pursuer import Pursuer
+from parallax.policy.settings import FEATURE_NORMS
 
 __all__ = [
     "FEATURE_NORMS",

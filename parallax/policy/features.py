@@ -41,7 +41,6 @@ import numpy as np
 import torch
 from torch import nn
 
-FEATURE_NORMS = ("none", "l1_per_scale", "zscore", "centred_unit", "zscore_unit", "difference")
 # Modes that keep running statistics of the raw states.
 _RUNNING_MODES = ("zscore", "centred_unit", "zscore_unit", "difference")
 #: The mode whose states are differences from the zero-disparity reference θ_ref.

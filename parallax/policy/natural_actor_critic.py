@@ -32,10 +32,11 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from parallax.config.schema import ROBOT_UPDATES, PolicyConfig
+from parallax.checks import ROBOT_UPDATES
 from parallax.geometry import ACTION_SET_DEG
 from parallax.policy.features import FeatureNormalizer, PolicyInputs, all_finite
 from parallax.policy.in_turn import apply_in_turn
+from parallax.policy.settings import PolicyConfig
 
 __all__ = ["PAPER_ACTIONS_DEG", "ROBOT_UPDATES", "NaturalActorCritic"]
 #: The paper's pan increments in degrees (§3.4): the action set of parallax.geometry.

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from omegaconf import DictConfig
 
-from parallax.config import READOUT_PANS, distance_readout
 from parallax.parts import Parts
+from parallax.readouts import PanReadout
 from parallax.routes.chosen import Chosen
 from parallax.routes.planned import Planned, planned_route
 from parallax.routes.route import Movement, Route, Worlds
@@ -35,10 +35,10 @@ __all__ = [
 ]
 
 
-def movement(cfg: DictConfig, parts: Parts) -> Movement:
-    """The run's movement: a sweep of L, or planned routes with movement.route=planned."""
+def movement(cfg: DictConfig, parts: Parts, readout: type[PanReadout]) -> Movement:
+    """The run's movement: a sweep of L, or planned routes (movement.route=planned) reading s
+    as ``readout``."""
     if parts.planner is None:
         return Sweep()
-    readout_key = READOUT_PANS[distance_readout(cfg)]
     window = int(cfg.metrics.distance_window)
-    return Planned(parts.planner, parts.explore, float(cfg.movement.explore), readout_key, window)
+    return Planned(parts.planner, parts.explore, float(cfg.movement.explore), readout, window)

@@ -14,18 +14,18 @@ import numpy as np
 from parallax.distance.planner import MovementPlanner
 from parallax.metrics import DistanceErrorTracker
 from parallax.presentation import Presentation
+from parallax.readouts import PanReadout
 from parallax.record import Route as RouteRecord
 from parallax.routes.chosen import Chosen
 from parallax.routes.route import Route
 from parallax.routes.sweep import SWEEP
 
 
-def planned_route(planner: MovementPlanner, readout_key: str) -> Chosen:
-    """The planner's route, reading s as ``readout_key`` (the Presentation field of
-    train.distance_readout)."""
+def planned_route(planner: MovementPlanner, readout: type[PanReadout]) -> Chosen:
+    """The planner's route, reading s as ``readout`` (train.distance_readout's)."""
 
     def choose(visited: list[int], so_far: Presentation) -> int | None:
-        pans = getattr(so_far, readout_key)[0]
+        pans = so_far.read(readout)[0]
         return planner.next_position(visited, pans[visited])
 
     return Chosen(choose)
@@ -41,21 +41,21 @@ class Planned:
         planner: MovementPlanner,
         explore_random: np.random.RandomState,
         explore: float,
-        readout_key: str,
+        readout: type[PanReadout],
         window: int,
     ) -> None:
         self.planner, self.explore_random, self.explore = planner, explore_random, float(explore)
-        self.readout_key = readout_key
+        self.readout = readout
         self.errors = DistanceErrorTracker(window=window)
 
     def route(self) -> Route:
         draw = self.explore_random.random_sample()  # drawn every time, ready or not
         if not self.planner.is_ready or draw < self.explore:
             return SWEEP
-        return planned_route(self.planner, self.readout_key)
+        return planned_route(self.planner, self.readout)
 
     def after(self, pres: Presentation, learnt_distance: bool) -> RouteRecord:
-        pans = getattr(pres, self.readout_key)[0]
+        pans = pres.read(self.readout)[0]
         if learnt_distance and pres.route is None:  # a full sweep: the planner's queue learns it
             self.planner.observe(pans, float(pres.distances[0]))
         lateral_cm = [100.0 * l for l in pres.lateral_positions]

@@ -36,18 +36,15 @@ from omegaconf import OmegaConf
 
 from parallax import checkpoint
 from parallax.config import (
-    DISTANCE_READOUTS,
-    READOUT_PANS,
-    distance_readout,
     load_run_config,
     perturbation_start,
     start_jitter_on,
     validate_stimuli,
 )
-from parallax.distance_step import distance_step
-from parallax.envs.stimuli import SPLITS
+from parallax.envs.settings import SPLITS
 from parallax.experiment import Experiment
 from parallax.metrics import position_label
+from parallax.readouts import READOUTS
 from parallax.routes import SWEEP, Route, planned_route
 from parallax.run_folder import RunLock, RunLocked, write_atomic
 from parallax.tools import plots
@@ -84,9 +81,9 @@ def run_jobs(
             env.task.set_next_stimulus(texture_index=tex, distance=d)
         pres = exp.run_presentation(learn=False, greedy=greedy, route=route)
         routes.append(pres.route)
-        pans.append(getattr(pres, READOUT_PANS[readout])[: len(batch)])
-        for name, attribute in READOUT_PANS.items():
-            other_pans.setdefault(name, []).append(getattr(pres, attribute)[: len(batch)])
+        pans.append(pres.read(READOUTS[readout])[: len(batch)])
+        for name, other in READOUTS.items():
+            other_pans.setdefault(name, []).append(pres.read(other)[: len(batch)])
         targets.append(pres.targets[: len(batch)])
         dists.append(pres.distances[: len(batch)])
         starts.append(pres.start_pans[: len(batch)])
@@ -119,7 +116,7 @@ def distance_results(
     """Errors by range and per distance of ``learner`` on the eye-movement vectors ``pans``, and
     the mean absolute error in the learner's metres. ``truths``: what a perfect learner would
     answer (default: the distances; for odometry targets the slip-free walk,
-    ``distance_step(parts).truths``); the ranges stay those of the panels' distances. The
+    ``target_source.truths``); the ranges stay those of the panels' distances. The
     vectors are kept ("samples") so that parallax-replay can score other learners on exactly the
     same eye movements."""
     from parallax.distance.metrics import distance_error_by_range
@@ -214,10 +211,8 @@ def evaluate(
         raise ValueError(f"--start-jitter must be auto, on or off, got {start_jitter!r}")
     if split not in SPLITS:
         raise ValueError(f"--split must be one of {', '.join(SPLITS)}, got {split!r}")
-    if readout is not None and readout not in DISTANCE_READOUTS:
-        raise ValueError(
-            f"--readout must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}"
-        )
+    if readout is not None and readout not in READOUTS:
+        raise ValueError(f"--readout must be one of {', '.join(READOUTS)}, got {readout!r}")
     run_dir = Path(run_dir)
     out_dir = Path(out) if out else run_dir
     cfg = load_run_config(run_dir)
@@ -225,7 +220,8 @@ def evaluate(
     if problem:  # before the trials, which take minutes
         where = f"--out {out}" if out else str(run_dir)
         raise ValueError(f"{where}: {problem}; choose another folder with --out DIR")
-    readout = readout or distance_readout(cfg)  # by default, s as the run's distance learner saw it
+    # by default, s as the run's distance learner saw it
+    readout = readout or str(cfg.train.distance_readout)
     state = read_checkpoint(run_dir, cfg, checkpoint_name, device)
     ckpt_path = run_dir / checkpoint_name
     for item in stimuli:
@@ -310,7 +306,7 @@ def evaluate(
         runs = {}
         # the worlds' random streams (textures aside: forced; the jittered start pans) as the
         # checkpoint left them, for the planned routes to start from as the sweeps did
-        start_streams = [env.task.random.get_state() for env in exp.envs]
+        start_streams = [env.task.random_state() for env in exp.envs]
         for mode, greedy in modes:
             runs[mode] = run = run_jobs(exp, jobs, greedy, readout, bar=bar)
             err = np.abs(run["pans"] - run["targets"])
@@ -343,15 +339,14 @@ def evaluate(
                 for part, done in (("grid", runs["greedy"]), ("between", between_run))
                 if done is not None
             }
-            for name in READOUT_PANS
+            for name in READOUTS
         }
         curves = {}
         if planning:
             # the planning robot's own routes, greedy, on the grid's presentations
-            key = READOUT_PANS[readout]
             for env, stream in zip(exp.envs, start_streams, strict=True):
-                env.task.random.set_state(stream)
-            route = planned_route(exp.planner, key)
+                env.task.set_random_state(stream)
+            route = planned_route(exp.planner, READOUTS[readout])
             routed = run_jobs(exp, jobs, True, readout, route=route, bar=bar)
             estimates = [
                 exp.planner.estimate(v, s[v]) for v, s in zip(routed["routes"], routed["pans"])
@@ -365,7 +360,7 @@ def evaluate(
                 exp.distance,
                 runs["greedy"]["pans"],
                 grid_distances,
-                distance_step(exp.parts).truths(grid_distances),
+                exp.distance.target_source.truths(grid_distances, exp.parts),
             )
             pd = result["distance"]["per_distance"]
             curves["grid (held-out textures)"] = ([float(k) for k in pd], list(pd.values()))
@@ -376,14 +371,14 @@ def evaluate(
                     exp.distance,
                     runs["sampled"]["pans"],
                     runs["sampled"]["distances"],
-                    distance_step(exp.parts).truths(runs["sampled"]["distances"]),
+                    exp.distance.target_source.truths(runs["sampled"]["distances"], exp.parts),
                 )
             if between_run is not None:
                 result["distance_between_grid"] = distance_results(
                     exp.distance,
                     between_run["pans"],
                     between_run["distances"],
-                    distance_step(exp.parts).truths(between_run["distances"]),
+                    exp.distance.target_source.truths(between_run["distances"], exp.parts),
                 )
                 pb = result["distance_between_grid"]["per_distance"]
                 curves["between grid points"] = ([float(k) for k in pb], list(pb.values()))
@@ -455,7 +450,7 @@ def frozen_experiment(
         learnt = state["experiment"]
         if trained_robots is not None and int(cfg.env.robots) != trained_robots:
             # the checkpoint holds one stream per trained robot; these robots keep their own
-            learnt = {**learnt, "env_random": [env.task.random.get_state() for env in exp.envs]}
+            learnt = {**learnt, "env_random": [env.task.random_state() for env in exp.envs]}
         try:
             exp.load_state_dict(learnt)
         except (KeyError, RuntimeError, TypeError, ValueError, IndexError) as exc:

@@ -3,9 +3,9 @@
 The distance learner never acts on the world: the eye-movement vectors s it sees depend only on
 the world, the coder and the policy. So a run's metrics.jsonl, which logs every s with its true
 distance in order, lets the learner be re-run with another weighting y, queue size c, weighting
-on/off or readout (``train.distance_readout``: each trial's last and best-encoded pans are both
-logged), and the result is exactly what `parallax-train` would have reported with that setting
-and the same seed (tests/tools/test_replay.py checks this bit for bit). That makes the y, c and
+on/off or readout (``train.distance_readout``: s as every pan readout reads it is logged), and
+the result is exactly what `parallax-train` would have reported with that setting and the same
+seed (tests/tools/test_replay.py checks this bit for bit). That makes the y, c and
 weighting ablations of Table 4 cost seconds per setting instead of a full run each.
 
     parallax-replay SOURCE_RUN_OR_MULTIRUN --out DIR distance.y=0,0.5,1,2
@@ -31,8 +31,10 @@ import sys
 from collections.abc import Iterable, Sequence
 from importlib import resources
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
+import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
@@ -40,19 +42,14 @@ from parallax import checkpoint
 from parallax.checkpoint import BEFORE_PERTURBATION_NAME, CHECKPOINT_NAME
 from parallax.config import (
     CONFIG_MODULE,
-    DISTANCE_READOUTS,
-    READOUT_PANS,
     RUN_CONFIG_NAME,
-    distance_readout,
     flatten,
-    growth_start,
     load_run_config,
     run_name,
 )
-from parallax.distance_step import learn_online
-from parallax.envs.walk import walk_robots
 from parallax.metrics import DistanceErrorTracker, finite_or_none
-from parallax.parts import body_walkers, distance_learner, truths_at, worlds
+from parallax.parts import body_walkers, distance_learner, worlds
+from parallax.readouts import READOUTS
 from parallax.run_folder import RunLock, RunLocked, write_atomic
 from parallax.tools.console import footer, header, progress
 from parallax.tools.report.groups import mean_sd
@@ -94,7 +91,7 @@ def parse_sweep(overrides: Sequence[str]) -> list[list[str]]:
 
 
 def _check_replayable(item: str, key: str) -> None:
-    # the readout only picks which of the two logged pans of each trial s is built from; the
+    # the readout only picks which of the logged pans of each trial s is built from; the
     # walk to the panel comes after the sweep, with its own random stream
     if not (key.startswith(REPLAYABLE_PREFIXES) or key == "train.distance_readout"):
         raise ReplayError(
@@ -165,16 +162,16 @@ def replay(
             f"{run_dir / METRICS_NAME} has {len(records)} presentations, the summary "
             f"{summary['presentations']}: the log is incomplete"
         )
-    readout = distance_readout(cfg)
-    if readout not in DISTANCE_READOUTS:
+    readout = str(cfg.train.distance_readout)
+    if readout not in READOUTS:
         raise ReplayError(
-            f"train.distance_readout must be one of {', '.join(DISTANCE_READOUTS)}, got {readout!r}"
+            f"train.distance_readout must be one of {', '.join(READOUTS)}, got {readout!r}"
         )
-    key = READOUT_PANS[readout]
+    key = READOUTS[readout].key
     if records and key not in records[0]:
         raise ReplayError(
-            f"{run_dir / METRICS_NAME} has no best_pans (the run predates their logging): "
-            "it can be replayed with train.distance_readout=last only"
+            f"{run_dir / METRICS_NAME} has no {key} (the run predates their logging): "
+            f"it cannot be replayed with train.distance_readout={readout}"
         )
     before_tracker = last_stats = before_stats = None
     body = _Body(cfg) if learner.target_source.walks else None
@@ -193,16 +190,15 @@ def replay(
             if until_perturbation:
                 break
         if body is not None:  # as the trainer: the spurt after the checkpoint at the switch
-            body.presentation(int(record["presentation"]) - 1)
+            body.at_presentation(int(record["presentation"]) - 1)
         # a planned route's s is partial: the network learns from full sweeps only, as in training
         if record["learnt_distance"] and record.get("route") is None:
             tracker.presentation = int(record["presentation"])
-            truths, readings = record["distances"], None
-            if body is not None:
-                truths, readings = body.walk(learner.target_source, record["distances"])
-            stats = learn_online(
-                learner, tracker, record[key], truths, readings, distances=record["distances"]
-            )
+            if body is not None:  # the panels where the sweep saw them, for the walks
+                body.place(record["distances"])
+            pans = np.atleast_2d(np.asarray(record[key], dtype=np.float64))
+            distances = np.asarray(record["distances"], dtype=np.float64)
+            stats, _ = learner.target_source.learn(learner, tracker, pans, distances, body)
             last_stats = stats or last_stats
             if stats.get("trained"):
                 fits.append((tracker.presentation, stats["epochs"], stats["stopped_max_fail"]))
@@ -278,39 +274,36 @@ class _OnlineHistory(DistanceErrorTracker):
 
 class _Body:
     """The bodies of a replayed run that walks (distance.targets=odometry): its worlds (physics
-    only), its walkers with the trainer's seeds, and the growth spurt's schedule."""
+    only) and its walkers with the trainer's seeds, as the target source's ``bodies``."""
 
     def __init__(self, cfg: DictConfig) -> None:
-        self.envs = worlds(cfg, [float(l) for l in cfg.curriculum.lateral_positions])
+        self.worlds = worlds(cfg, [float(l) for l in cfg.curriculum.lateral_positions])
         self.walkers = body_walkers(cfg)
-        self.growth_start = growth_start(cfg)
 
     @property
     def grown(self) -> bool:
         return self.walkers[0].grown
 
-    def presentation(self, index: int) -> None:
-        """Presentation ``index`` (0-based) is next: the body grown or not, as in training."""
+    def at_presentation(self, index: int) -> None:
+        """Presentation ``index`` (0-based) is next: the bodies grown or not, as in training."""
         for walker in self.walkers:
-            walker.grown = self.growth_start is not None and index >= self.growth_start
+            walker.at_presentation(index)
 
-    def walk(self, source, distances: Sequence[float]) -> tuple[list[float], list[float | None]]:
-        """The walks after a sweep with panels at ``distances``: the truths and the readings."""
-        physics = [env.physics for env in self.envs]
-        for body, d in zip(physics, distances, strict=True):
-            body.set_stimulus(body.texture_index(), float(d))
-        counted, reach = walk_robots(physics, self.walkers, source.walk_fraction)
-        return [source.truth(d, r) for d, r in zip(distances, reach)], counted
+    def place(self, distances: Sequence[float]) -> None:
+        """Each robot's panel at its distance of the sweep, for the walks after it."""
+        for world, d in zip(self.worlds, distances, strict=True):
+            world.physics.set_stimulus(world.physics.texture_index(), float(d))
 
     def truths(self, source, distances: Sequence[float], grown: bool) -> list[float]:
         """A perfect learner's answers for panels at ``distances`` with the body grown or not."""
         walker = copy.deepcopy(self.walkers[0])
         walker.grown = grown
-        return truths_at(source, walker, self.envs[0].physics, distances).tolist()
+        body = SimpleNamespace(worlds=self.worlds[:1], walkers=[walker])
+        return source.truths(distances, body).tolist()
 
     def close(self) -> None:
-        for env in self.envs:
-            env.close()
+        for world in self.worlds:
+            world.close()
 
 
 def _rescore_evals(

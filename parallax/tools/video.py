@@ -16,6 +16,7 @@ Bad input ends the command with one line, and nothing written.
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import os
 import sys
@@ -26,10 +27,9 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from parallax import checkpoint
-from parallax.config import READOUT_PANS, distance_readout, load_run_config
-from parallax.distance_step import distance_step
-from parallax.envs.stimuli import SPLITS
+from parallax import checkpoint, readouts
+from parallax.config import load_run_config
+from parallax.envs.settings import SPLITS
 from parallax.panel import PANEL_COLOURS, Watched, frame_size, panel_frames, watched
 from parallax.routes import SWEEP, planned_route
 from parallax.tools.evaluate import frozen_experiment, read_checkpoint
@@ -99,10 +99,10 @@ def watched_presentations(
         if not 0 <= texture_index < photos:
             raise ValueError(f"--texture must be between 0 and {photos - 1}, got {texture_index}")
         name = exp.envs[0].physics.stimuli.names[texture_index]
-        readout = distance_readout(cfg)
+        readout = readouts.of_run(cfg)
         planner = exp.planner if exp.planner is not None and exp.planner.is_ready else None
-        route = SWEEP if planner is None else planned_route(planner, READOUT_PANS[readout])
-        truths = distance_step(exp.parts).truths
+        route = SWEEP if planner is None else planned_route(planner, readout)
+        truths = functools.partial(exp.distance.target_source.truths, bodies=exp.parts)
         say(
             f"[parallax-render] {run_dir}/{checkpoint_name} (presentation "
             f"{int(state['presentation'])}{', perturbed' if perturbed else ''}), greedy, on "

@@ -12,7 +12,7 @@ from scipy.optimize import least_squares
 from torch import nn
 
 from parallax.distance import DistanceMLP, LevenbergMarquardt
-from parallax.distance.levenberg_marquardt import _DampedSolver
+from parallax.distance.levenberg_marquardt import DampedSolver
 from parallax.tools.analysis.synthetic_pans import PAPER_LATERAL_POSITIONS_M, paper_regression
 
 
@@ -42,13 +42,17 @@ def minpack_sse(
 
     def residuals(flat):
         with torch.no_grad():
-            return optimizer._residuals(torch.from_numpy(flat), regression, batch).numpy()
+            return optimizer.residuals(torch.from_numpy(flat), regression, batch).numpy()
 
     def jacobian(flat):
-        return optimizer._jacobian(torch.from_numpy(flat), regression, batch, True, None).numpy()
+        return optimizer.jacobian(torch.from_numpy(flat), regression, batch, True).numpy()
 
     solution = least_squares(
-        residuals, optimizer._flat().numpy().copy(), jac=jacobian, method="lm", max_nfev=5000
+        residuals,
+        optimizer.flat_parameters().numpy().copy(),
+        jac=jacobian,
+        method="lm",
+        max_nfev=5000,
     )
     assert solution.status > 0, solution.message
     return 2.0 * float(solution.cost)
@@ -114,9 +118,9 @@ def test_per_sample_jacobian_equals_full_jacobian():
     )
     inputs, targets = torch.from_numpy(pans), torch.from_numpy(distances)
     optimizer = trainlm(scaled_network(inputs, targets, hidden=5, seed=1))
-    flat = optimizer._flat()
-    per_sample = optimizer._jacobian(flat, regression, (inputs, targets), True, None)
-    full = optimizer._jacobian(flat, regression, (inputs, targets), False, None)
+    flat = optimizer.flat_parameters()
+    per_sample = optimizer.jacobian(flat, regression, (inputs, targets), True)
+    full = optimizer.jacobian(flat, regression, (inputs, targets), False)
     assert per_sample.shape == (20, optimizer.num_params)
     torch.testing.assert_close(per_sample, full, rtol=1e-12, atol=1e-12)
 
@@ -133,8 +137,8 @@ def test_the_networks_closed_form_jacobian_is_autograds_bit_for_bit(inputs, hidd
     if rows > 1:
         network.fit_scaling(pans, distances, preserve_function=False)
     optimizer = trainlm(network)
-    flat = optimizer._flat()
-    autograd = optimizer._jacobian(flat, regression, (pans, distances), True, None)
+    flat = optimizer.flat_parameters()
+    autograd = optimizer.jacobian(flat, regression, (pans, distances), True)
     assert torch.equal(network.parameter_jacobian(pans), autograd)
     # so a fit that is handed it takes the same steps as one that differentiates
     fits = []
@@ -153,7 +157,7 @@ def test_dual_and_primal_steps_agree():
     generator = torch.Generator().manual_seed(0)
     jacobian = torch.randn(30, 50, generator=generator, dtype=torch.float64)
     errors = torch.randn(30, generator=generator, dtype=torch.float64)
-    dual = _DampedSolver(jacobian, errors, jacobian.T @ errors)
+    dual = DampedSolver(jacobian, errors, jacobian.T @ errors)
     assert dual.dual
     gram = jacobian.T @ jacobian + 0.5 * torch.eye(50, dtype=torch.float64)
     primal_step = -torch.linalg.solve(gram, jacobian.T @ errors)
@@ -169,7 +173,7 @@ def test_weight_decay_steps_are_the_extra_rows_steps(rows):
     errors = torch.randn(rows, generator=generator, dtype=torch.float64)
     weights = torch.randn(50, generator=generator, dtype=torch.float64)
     decay, mu = 0.1, 1e-3
-    solver = _DampedSolver(jacobian, errors, jacobian.T @ errors + decay * weights, decay, weights)
+    solver = DampedSolver(jacobian, errors, jacobian.T @ errors + decay * weights, decay, weights)
     assert solver.dual == (rows < 50)
     root = math.sqrt(decay)
     stacked = torch.cat([jacobian, root * torch.eye(50, dtype=torch.float64)])
@@ -245,7 +249,7 @@ def test_overflow_never_reaches_the_parameters():
 def test_nan_jacobian_gives_no_step():
     jacobian = torch.full((3, 2), math.nan, dtype=torch.float64)
     errors = torch.ones(3, dtype=torch.float64)
-    assert _DampedSolver(jacobian, errors, jacobian.T @ errors)(1e-3) is None
+    assert DampedSolver(jacobian, errors, jacobian.T @ errors)(1e-3) is None
 
 
 def test_refuses_a_model_too_large_for_a_dense_jacobian():

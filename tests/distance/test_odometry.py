@@ -18,8 +18,8 @@ from parallax.distance import (
     SupervisorTargets,
     distance_error_by_range,
 )
+from parallax.distance.online import learn_online
 from parallax.distance.targets import make_target_source
-from parallax.distance_step import learn_online
 from parallax.metrics import DistanceErrorTracker
 from parallax.tools.evaluate import distance_results
 

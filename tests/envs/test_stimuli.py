@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from parallax.envs import stimuli
+from parallax.envs.settings import PROCEDURAL_KINDS
 
 
 def _photo_of(name: str) -> str:
@@ -106,7 +107,7 @@ def test_user_folder_with_too_few_images_is_a_clear_error(tmp_path):
         stimuli.load_stimuli({"source": "dir", "dir": str(tmp_path / "missing")})
 
 
-@pytest.mark.parametrize("kind", stimuli.PROCEDURAL_KINDS)
+@pytest.mark.parametrize("kind", PROCEDURAL_KINDS)
 def test_procedural_textures_are_deterministic_and_split(kind):
     settings = {"source": "procedural", "kind": kind, "count": 4, "resolution": 64}
     train = stimuli.load_stimuli(settings)

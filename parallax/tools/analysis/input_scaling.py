@@ -41,7 +41,7 @@ from tqdm import tqdm
 
 from parallax.checkpoint import BEFORE_PERTURBATION_NAME, CHECKPOINT_NAME
 from parallax.config import run_name
-from parallax.distance.network import INPUT_SCALINGS
+from parallax.distance.settings import INPUT_SCALINGS
 from parallax.tools.replay import ReplayError, find_sources, replay
 from parallax.tools.report.groups import Stat
 from parallax.tools.report.paired import paired_difference, seed_means, seeds_needed

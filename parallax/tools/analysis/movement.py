@@ -34,7 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from parallax.config import READOUT_PANS, distance_readout, load_run_config
+from parallax import readouts
+from parallax.config import load_run_config
 from parallax.distance.planner import MovementPlanner
 from parallax.metrics import position_label
 from parallax.tools.evaluate import route_results
@@ -53,7 +54,7 @@ def planner_of(run_dir: Path, price_per_trial: float = 0.0) -> tuple[MovementPla
     planner = MovementPlanner(
         lateral, queue_size=int(cfg.distance.queue_size), price_per_trial=price_per_trial
     )
-    key = READOUT_PANS[distance_readout(cfg)]
+    key = readouts.of_run(cfg).key
     learnt = [r for r in read_stream(run_dir) if r["learnt_distance"] and r.get("route") is None]
     for record in learnt[-planner.queue_size :]:
         for s, d in zip(record[key], record["distances"]):

@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from parallax.config import READOUT_PANS, distance_readout, load_run_config
-from parallax.distance_step import learn_online
+from parallax import readouts
+from parallax.config import load_run_config
+from parallax.distance.online import learn_online
 from parallax.metrics import DistanceErrorTracker
 from parallax.parts import distance_learner
 from parallax.tools.console import footer, header, progress
@@ -41,7 +42,7 @@ def trace(run_dir: str | Path, overrides: Sequence[str] = (), bar=None) -> list[
     cfg.merge_with_dotlist(list(overrides))
     learner = distance_learner(cfg)
     tracker = DistanceErrorTracker(window=int(cfg.metrics.distance_window))
-    key = READOUT_PANS[distance_readout(cfg)]
+    key = readouts.of_run(cfg).key
     rows, fit = [], {}
     for record in read_stream(run_dir):
         if bar is not None:

@@ -21,8 +21,8 @@ import numpy as np
 import torch
 from scipy.optimize import least_squares
 
-from parallax.distance.learner import DistanceLearner, _regression_residuals
-from parallax.distance.levenberg_marquardt import LevenbergMarquardt, _DampedSolver
+from parallax.distance.learner import DistanceLearner, regression_residuals
+from parallax.distance.levenberg_marquardt import DampedSolver, LevenbergMarquardt
 from parallax.tools.analysis.synthetic_pans import PAPER_LATERAL_POSITIONS_M, paper_regression
 
 SCIPY_MAX_NFEV = 40
@@ -40,7 +40,7 @@ def _median_ms(
     return 1e3 * statistics.median(times)
 
 
-def _paper_sized_learner() -> DistanceLearner:
+def paper_sized_learner() -> DistanceLearner:
     pans, distances = paper_regression(300, np.random.default_rng(0))
     learner = DistanceLearner(
         PAPER_LATERAL_POSITIONS_M,
@@ -70,14 +70,14 @@ def _scipy_fit(
 
     def residuals(flat: np.ndarray) -> np.ndarray:
         with torch.no_grad():
-            values = optimizer._residuals(
-                torch.from_numpy(flat), _regression_residuals, batch
+            values = optimizer.residuals(
+                torch.from_numpy(flat), regression_residuals, batch
             ).numpy()
         return np.concatenate([values, root_decay * flat[:decay_rows], np.zeros(padding)])
 
     def jacobian(flat: np.ndarray) -> np.ndarray:
-        values = optimizer._jacobian(
-            torch.from_numpy(flat), _regression_residuals, batch, True
+        values = optimizer.jacobian(
+            torch.from_numpy(flat), regression_residuals, batch, True
         ).numpy()
         decay = root_decay * np.eye(params)[:decay_rows]
         return np.concatenate([values, decay, np.zeros((padding, params))])
@@ -98,38 +98,38 @@ class EpochFromStart:
     def __init__(self, learner: DistanceLearner) -> None:
         self.optimizer = learner.optimizer
         self.inputs, self.targets = learner.queue.inputs * learner.weights, learner.queue.targets
-        self.start, self.start_mu = self.optimizer._flat().clone(), self.optimizer.mu
+        self.start, self.start_mu = self.optimizer.flat_parameters().clone(), self.optimizer.mu
 
     def restore(self) -> None:
-        self.optimizer._write(self.start)
+        self.optimizer.set_flat_parameters(self.start)
         self.optimizer.mu = self.start_mu
 
     def epoch(self) -> None:
-        self.optimizer.step(_regression_residuals, self.inputs, self.targets, per_sample=True)
+        self.optimizer.step(regression_residuals, self.inputs, self.targets, per_sample=True)
 
 
 def run(repeats: int = 50) -> dict[str, float]:
     """Median milliseconds per operation, plus the SciPy comparison (see the module docstring)."""
-    learner = _paper_sized_learner()
+    learner = paper_sized_learner()
     timed = EpochFromStart(learner)
     optimizer, inputs, targets = timed.optimizer, timed.inputs, timed.targets
     start, start_mu = timed.start, timed.start_mu
     restore, epoch = timed.restore, timed.epoch
 
     def jacobian() -> None:
-        optimizer._jacobian(start, _regression_residuals, (inputs, targets), True)
+        optimizer.jacobian(start, regression_residuals, (inputs, targets), True)
 
-    full_jacobian = optimizer._jacobian(
-        start, _regression_residuals, (inputs, targets), True
+    full_jacobian = optimizer.jacobian(
+        start, regression_residuals, (inputs, targets), True
     ).double()
     with torch.no_grad():
-        errors = optimizer._residuals(start, _regression_residuals, (inputs, targets)).double()
+        errors = optimizer.residuals(start, regression_residuals, (inputs, targets)).double()
 
     decay, weights = optimizer.weight_decay, start.double()
 
     def damped_solve() -> None:
         gradient = full_jacobian.T @ errors + decay * weights
-        _DampedSolver(full_jacobian, errors, gradient, decay, weights)(start_mu)
+        DampedSolver(full_jacobian, errors, gradient, decay, weights)(start_mu)
 
     for _ in range(3):  # warm-up
         restore(), epoch(), jacobian(), damped_solve()
@@ -153,7 +153,7 @@ def run(repeats: int = 50) -> dict[str, float]:
     restore()
     begin = time.perf_counter()
     ours = optimizer.run(
-        _regression_residuals, inputs, targets, epochs=max(scipy_jacobians, 1), per_sample=True
+        regression_residuals, inputs, targets, epochs=max(scipy_jacobians, 1), per_sample=True
     )
     results.update(
         scipy_fit_ms=scipy_ms,
@@ -161,7 +161,7 @@ def run(repeats: int = 50) -> dict[str, float]:
         scipy_jacobians=float(scipy_jacobians),
         lm_same_jacobians_ms=1e3 * (time.perf_counter() - begin),
         lm_same_jacobians_sse=ours.sse,
-        start_sse=optimizer._objective(errors, start),
+        start_sse=optimizer.objective(errors, start),
     )
     return results
 

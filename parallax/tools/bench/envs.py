@@ -16,7 +16,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from parallax.config.schema import WalkConfig
+from parallax.envs.settings import WalkConfig
 from parallax.envs.walk import Walker
 from parallax.tools.bench.timing import interleaved_medians_ms
 

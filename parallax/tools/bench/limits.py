@@ -51,7 +51,7 @@ def cuda_components(repeats: int) -> dict[str, float]:
     update and one LM epoch on the GPU, each followed by a device synchronisation."""
     from parallax.policy.natural_actor_critic import NaturalActorCritic
     from parallax.tools.bench.coding import _coder, _frames
-    from parallax.tools.bench.distance import EpochFromStart, _paper_sized_learner
+    from parallax.tools.bench.distance import EpochFromStart, paper_sized_learner
     from parallax.tools.bench.policy import NUM_SCALES, STATE_DIM, THETA_ALONE, _pooled_activities
 
     operations = {}
@@ -77,7 +77,7 @@ def cuda_components(repeats: int) -> dict[str, float]:
             policy.update(states, action, rewards, states, valid)
 
         operations[f"policy_act_update_B{batch}_ms"] = _synchronised(act_update, "cuda")
-    timed = EpochFromStart(_paper_sized_learner().to("cuda"))
+    timed = EpochFromStart(paper_sized_learner().to("cuda"))
     operations["lm_epoch_ms"] = _synchronised(lambda: (timed.restore(), timed.epoch()), "cuda")
     return interleaved_medians_ms(operations, repeats, warmup=5)
 

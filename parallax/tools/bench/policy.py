@@ -13,8 +13,8 @@ import time
 
 import torch
 
-from parallax.policy.features import FEATURE_NORMS
 from parallax.policy.natural_actor_critic import NaturalActorCritic
+from parallax.policy.settings import FEATURE_NORMS
 
 STATE_DIM = 576
 NUM_SCALES = 2
