@@ -225,6 +225,7 @@ def test_a_start_without_a_checkpoint_keeps_no_earlier_log_lines(tmp_path, tiny_
     ).read_text()
 
 
+@pytest.mark.slow
 def test_sigkill_then_resume_gives_the_same_summary(tmp_path, tiny_overrides):
     overrides = tiny_overrides + ["train.presentations=10", "train.checkpoint_every=1"]
     ref = tmp_path / "ref"
