@@ -190,6 +190,11 @@ class DistanceLearner:
         train_rows, validation_rows = order[:training], order[training : training + validation]
         return train_rows.sort().values, validation_rows.sort().values
 
+    def residual_jacobian(self, inputs: Tensor, _targets: Tensor) -> Tensor:
+        """The Jacobian of the fit's residuals d(s) − target: the network's own, in closed form
+        (what Levenberg–Marquardt is handed instead of autograd's)."""
+        return self.network.parameter_jacobian(inputs)
+
     def _fit(self) -> dict[str, float]:
         """Fits the network to the queue (§3.5.2); the statistics ``observe`` documents."""
         if self.reset_mu or self.optimizer.mu > self.optimizer.mu_max:
@@ -224,8 +229,7 @@ class DistanceLearner:
             per_sample=True,
             validation=validation,
             max_fail=self.max_fail,
-            # residual = d(s) − target: its Jacobian is the network's own
-            jacobian=lambda inputs, _: self.network.parameter_jacobian(inputs),
+            jacobian=self.residual_jacobian,
         )
         self.fits += 1
         mse = result.sse / targets.numel()

@@ -96,7 +96,7 @@ class EpochFromStart:
     runs one epoch. The weighted inputs, targets and start are kept for the other timings."""
 
     def __init__(self, learner: DistanceLearner) -> None:
-        self.optimizer = learner.optimizer
+        self.optimizer, self.closed_form = learner.optimizer, learner.residual_jacobian
         self.inputs, self.targets = learner.queue.inputs * learner.weights, learner.queue.targets
         self.start, self.start_mu = self.optimizer.flat_parameters().clone(), self.optimizer.mu
 
@@ -105,7 +105,13 @@ class EpochFromStart:
         self.optimizer.mu = self.start_mu
 
     def epoch(self) -> None:
-        self.optimizer.step(regression_residuals, self.inputs, self.targets, per_sample=True)
+        self.optimizer.step(
+            regression_residuals,
+            self.inputs,
+            self.targets,
+            per_sample=True,
+            jacobian=self.closed_form,
+        )
 
 
 def run(repeats: int = 50) -> dict[str, float]:
@@ -116,8 +122,11 @@ def run(repeats: int = 50) -> dict[str, float]:
     start, start_mu = timed.start, timed.start_mu
     restore, epoch = timed.restore, timed.epoch
 
-    def jacobian() -> None:
+    def jacobian() -> None:  # autograd's, as a model without a closed form gets it
         optimizer.jacobian(start, regression_residuals, (inputs, targets), True)
+
+    def closed_form_jacobian() -> None:  # the learner's, at the parameters restore() sets
+        timed.closed_form(inputs, targets)
 
     full_jacobian = optimizer.jacobian(
         start, regression_residuals, (inputs, targets), True
@@ -136,6 +145,7 @@ def run(repeats: int = 50) -> dict[str, float]:
     results = {
         "lm_epoch_ms": _median_ms(epoch, repeats, restore),
         "lm_jacobian_ms": _median_ms(jacobian, repeats),
+        "lm_closed_form_jacobian_ms": _median_ms(closed_form_jacobian, repeats, restore),
         "lm_gram_and_solve_ms": _median_ms(damped_solve, repeats),
         "torch_threads": float(torch.get_num_threads()),
     }
@@ -153,7 +163,12 @@ def run(repeats: int = 50) -> dict[str, float]:
     restore()
     begin = time.perf_counter()
     ours = optimizer.run(
-        regression_residuals, inputs, targets, epochs=max(scipy_jacobians, 1), per_sample=True
+        regression_residuals,
+        inputs,
+        targets,
+        epochs=max(scipy_jacobians, 1),
+        per_sample=True,
+        jacobian=timed.closed_form,
     )
     results.update(
         scipy_fit_ms=scipy_ms,
