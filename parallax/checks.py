@@ -73,6 +73,12 @@ class Checks:
     def fail(key: str, value: Any, reason: str) -> None:
         raise ConfigError(key, value, reason)
 
+    def require(self, key: str, wanted: Any, reason: str) -> None:
+        """``key`` must be ``wanted`` (another setting's value asks for it: ``reason`` says why)."""
+        value = self.get(key)
+        if value != wanted:
+            self.fail(key, value, reason)
+
     def integer(self, key: str, minimum: int, what: str = "") -> int:
         value = self.get(key)
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:

@@ -212,17 +212,14 @@ def check_movement(check: Checks) -> None:
                 queue,
                 "movement.route=planned needs at least 2 (its leave-one-out errors)",
             )
-        if check.get("env.robots") != 1:
-            check.fail("env.robots", check.get("env.robots"), "movement.route=planned needs 1")
-        if check.get("distance.targets") != "supervisor":
-            check.fail(
-                "distance.targets",
-                check.get("distance.targets"),
-                "movement.route=planned learns from the supervisor's distances",
-            )
-        if check.get("curriculum.stages") is not None:
-            check.fail(
-                "curriculum.stages",
-                check.get("curriculum.stages"),
-                "movement.route=planned plans over all of L: leave the stages null",
-            )
+        check.require("env.robots", 1, "movement.route=planned needs 1")
+        check.require(
+            "distance.targets",
+            "supervisor",
+            "movement.route=planned learns from the supervisor's distances",
+        )
+        check.require(
+            "curriculum.stages",
+            None,
+            "movement.route=planned plans over all of L: leave the stages null",
+        )

@@ -244,14 +244,12 @@ def check_motion(check: Checks) -> None:
     profile = check.choice("env.sweep.profile", SWEEP_PROFILES)
     if motion != "continuous":
         return
-    if check.get("movement.route") != "list":
-        check.fail("movement.route", check.get("movement.route"), "env.motion=continuous sweeps L")
-    if check.get("train.distance_readout") != "last":
-        check.fail(
-            "train.distance_readout",
-            check.get("train.distance_readout"),
-            "env.motion=continuous has one trial a presentation: q_p is the pan at l_p (last)",
-        )
+    check.require("movement.route", "list", "env.motion=continuous sweeps L")
+    check.require(
+        "train.distance_readout",
+        "last",
+        "env.motion=continuous has one trial a presentation: q_p is the pan at l_p (last)",
+    )
     # the eye must be able to keep up with the target where it turns fastest
     nearest = float(check.get("env.distances.start"))
     step = max(abs(float(a)) for a in check.get("policy.actions"))
