@@ -192,12 +192,11 @@ class LevenbergMarquardt:
             )
 
         if jacobian is None:  # autograd's
-            matrix = self.jacobian(flat, closure, batch, per_sample)
+            matrix = self.jacobian(flat, closure, batch, per_sample).double()
         else:  # the model's own
-            matrix = jacobian(*batch)
-        jacobian = matrix.double()
+            matrix = jacobian(*batch).double()
         errors = residuals.double()
-        gradient = jacobian.T @ errors
+        gradient = matrix.T @ errors
         weights = flat.double()
         if self.weight_decay:
             gradient = gradient + self.weight_decay * weights
@@ -207,7 +206,7 @@ class LevenbergMarquardt:
         if grad_norm < self.min_grad:
             return LMStepResult(False, sse, grad_norm, self.mu, "min_grad")
 
-        solve = DampedSolver(jacobian, errors, gradient, self.weight_decay, weights)
+        solve = DampedSolver(matrix, errors, gradient, self.weight_decay, weights)
         while self.mu <= self.mu_max:
             delta = solve(self.mu)
             if delta is not None:
