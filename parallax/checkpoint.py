@@ -228,7 +228,10 @@ def read(
     if isinstance(state.get("config"), dict):
         state["config"] = upgrade_saved(state["config"])
     if config is not None and isinstance(state.get("config"), dict):
-        changed = changed_settings(OmegaConf.create(state["config"]), config)
+        # a schedule point not yet reached may move (parallax.config.changed_settings)
+        reached = state["presentation"] if isinstance(state["presentation"], int) else None
+        saved = OmegaConf.create(state["config"])
+        changed = changed_settings(saved, config, reached=reached)
         if changed:
             listed = "; ".join(changed[:2]) + ("; …" if len(changed) > 2 else "")
             raise CheckpointError(path, f"was written by a run with other settings ({listed})")

@@ -136,7 +136,8 @@ def run_directory_error(cfg: DictConfig, run_dir: str | Path, key: str | None = 
         # Run directories are named by the overrides only: a run trained with another default
         # would otherwise be continued with this one.
         try:
-            changed = changed_settings(load_run_config(run_dir), cfg)
+            # the schedule points are checked below, against the checkpoint's presentation
+            changed = changed_settings(load_run_config(run_dir), cfg, schedule=False)
         except ValueError as exc:
             changed = [str(exc)]
         if changed:

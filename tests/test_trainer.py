@@ -137,6 +137,37 @@ def test_a_finished_run_lengthened_after_its_perturbation_matches_the_longer_run
     ).read_text()
 
 
+def test_the_phase_before_the_perturbation_lengthened_from_its_checkpoint_matches_the_longer_run(
+    tmp_path, tiny_overrides
+):
+    # A finished run's state just before its perturbation (presentation 2 of 4) continued with a
+    # later start (presentation 4 of 8): the run so far is the same under both schedules, so it
+    # gives the numbers of the longer run trained from the start
+    import shutil
+
+    from parallax import checkpoint
+
+    perturbed = tiny_overrides + ["perturbation=rotate_blur", "perturbation.start_fraction=0.5"]
+    longer = perturbed + ["train.presentations=8"]
+    full = _train(tmp_path / "full", longer)
+    _train(tmp_path / "short", perturbed + ["train.presentations=4"])
+    (tmp_path / "part").mkdir()
+    shutil.copy(
+        tmp_path / "short" / checkpoint.BEFORE_PERTURBATION_NAME,
+        tmp_path / "part" / checkpoint.CHECKPOINT_NAME,
+    )
+    shutil.copy(tmp_path / "short" / "metrics.jsonl", tmp_path / "part" / "metrics.jsonl")
+    resumed = _train(tmp_path / "part", longer)
+    assert _without_timing(resumed) == _without_timing(full)
+    assert resumed["before_perturbation"]["presentations"] == 4
+    assert (tmp_path / "part" / "metrics.jsonl").read_text() == (
+        tmp_path / "full" / "metrics.jsonl"
+    ).read_text()
+    # the short run's last checkpoint has seen its perturbation: it cannot move
+    with pytest.raises(checkpoint.CheckpointError, match="start presentation.*2 → 4"):
+        _train(tmp_path / "short", longer)
+
+
 def test_the_start_jitter_ends_after_start_jitter_presentations(tmp_path, tiny_overrides):
     _train(
         tmp_path,

@@ -250,11 +250,16 @@ def run_settings(config: dict) -> dict[str, Any]:
     return flatten(config)
 
 
-def changed_settings(saved: DictConfig, current: DictConfig) -> list[str]:
+def changed_settings(
+    saved: DictConfig, current: DictConfig, reached: int | None = None, schedule: bool = True
+) -> list[str]:
     """``key: saved → current`` for every setting that differs between a run's saved config and
     the config it is being resumed with (RESUMABLE_CHANGES aside). A default that differs from
     the one the run was trained with shows up here, so a resumed run never mixes two settings
-    silently."""
+    silently. ``reached``: the presentations the checkpoint holds; a schedule point (the
+    perturbation's start, the growth spurt) may then move where the run has reached neither its
+    old nor its new presentation, since the run so far is the same under both (a phase before
+    the perturbation lengthened). Without it, a schedule point may not move."""
     saved_dict = OmegaConf.to_container(saved, resolve=True)
     current_dict = OmegaConf.to_container(current, resolve=True)
     before, after = run_settings(saved_dict), run_settings(current_dict)
@@ -263,20 +268,23 @@ def changed_settings(saved: DictConfig, current: DictConfig) -> list[str]:
         for key in sorted(set(before) | set(after))
         if key not in RESUMABLE_CHANGES and before.get(key) != after.get(key)
     ]
-    # train.presentations alone would move a fractional perturbation start: compare where it starts
-    start_before, start_after = perturbation_start(saved_dict), perturbation_start(current_dict)
-    if start_before != start_after:
-        changes.append(
-            "the perturbation's start presentation (perturbation.start_fraction × "
-            f"train.presentations): {start_before} → {start_after}"
-        )
-    growth_before, growth_after = growth_start(saved_dict), growth_start(current_dict)
-    if growth_before != growth_after:
-        changes.append(
-            "the growth spurt's presentation (env.walk.growth_start_fraction × "
-            f"train.presentations): {growth_before} → {growth_after}"
-        )
+    # train.presentations alone would move a fractional schedule point: compare where each is
+    schedule_points = (
+        (perturbation_start, "the perturbation's start presentation (perturbation.start_fraction"),
+        (growth_start, "the growth spurt's presentation (env.walk.growth_start_fraction"),
+    )
+    for point, what in schedule_points if schedule else ():
+        old, new = point(saved_dict), point(current_dict)
+        if old != new and not _not_reached(reached, old, new):
+            changes.append(f"{what} × train.presentations): {old} → {new}")
     return changes
+
+
+def _not_reached(reached: int | None, *points: int | None) -> bool:
+    """Whether a run that has completed ``reached`` presentations has seen none of the schedule
+    ``points`` (None: never): the switch happens as presentation ``point`` begins, so a run that
+    stopped at it has not seen it."""
+    return reached is not None and all(p is None or reached <= p for p in points)
 
 
 def perturbation_start(cfg) -> int | None:

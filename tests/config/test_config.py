@@ -140,6 +140,11 @@ def test_a_run_is_lengthened_only_where_its_perturbation_stays():
     ]
     unperturbed = OmegaConf.merge(saved, {"perturbation": {"start_fraction": None}})
     assert any("start presentation" in change for change in changed_settings(saved, unperturbed))
+    # a checkpoint that has not reached the start (133, nor 267) may move it; one past it may not
+    assert changed_settings(saved, moved, reached=133) == []
+    assert changed_settings(saved, moved, reached=134) == changed_settings(saved, moved)
+    assert changed_settings(saved, unperturbed, reached=100) == []
+    assert changed_settings(saved, moved, schedule=False) == []
 
 
 @pytest.mark.parametrize(
