@@ -32,6 +32,10 @@
 #   WITHOUT_ARGS  the same for the without family (default: the grid only)
 #   OTHER_ARGS  parallax-eval options for textures of another kind (default: the grid 3.0, 3.2,
 #               …, 10.0 m, greedy only), on the 5–20 cm models of every family but without
+#   TRAINED_ARGS  parallax-eval options of the eye as trained, the paper's probable scoring of
+#               Tables 4–5 (default: the training photographs on the grid, the learning policy
+#               beside the greedy one), on the multiple-position models of every family but
+#               without
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
@@ -56,6 +60,7 @@ read -ra eval_args <<< "${EVAL_ARGS:---robots 16 --greedy-only --between $(LC_AL
 # the recipe less an improvement: the grid alone
 read -ra without_args <<< "${WITHOUT_ARGS:---robots 16 --greedy-only --between}"
 read -ra other_args <<< "${OTHER_ARGS:---robots 16 --greedy-only --between --distances $(LC_ALL=C seq -s ' ' -f '%.1f' 3.0 0.2 10.0)}"
+read -ra trained_args <<< "${TRAINED_ARGS:---robots 16 --split train --between}"
 # textures of another kind than the photographs: generated ones, and a folder of photographs of
 # other subjects that neither split uses (matplotlib's and scikit-image's sample images)
 other_folder="$(px_sweep_dir stimuli_other)"  # copies of installed files: not committed
@@ -192,6 +197,11 @@ evaluate() {  # SWEEP NAME...: the evaluations of those experiments' finished mo
       fi
       queue_eval "$model" checkpoint.pt "$run" "${args[@]}"
       queue_eval "$model" checkpoint_before_perturbation.pt "$run/eval_before" "${args[@]}"
+      if [[ "$family" != without ]]; then
+        queue_eval "$model" checkpoint.pt "$run/eval_trained" "${trained_args[@]}"
+        queue_eval "$model" checkpoint_before_perturbation.pt "$run/eval_before_trained" \
+          "${trained_args[@]}"
+      fi
       if [[ "$family" != without && "$name" == *multi_5_20* ]]; then
         for kind in "${other_kinds[@]}"; do
           read -ra settings <<< "${kind#*:}"

@@ -309,7 +309,16 @@ def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_fil
     settings = [s for args in parsed for s in args.stimuli]
     assert "env.stimuli.source=procedural" in settings
     assert any(s.startswith("env.stimuli.dir=") for s in settings)
-    assert all(args.robots == 16 and args.greedy_only for args in parsed)
+    assert all(args.robots == 16 for args in parsed)
+    # greedy on held-out textures, but the paper's probable scoring: the eye as trained (its
+    # learning policy on the training photographs), before and after, multi-position models only
+    trained_eye = [
+        (line, args) for line, args in zip(evals, parsed, strict=True) if not args.greedy_only
+    ]
+    assert trained_eye and all(a.split == "train" and a.stimuli == [] for _, a in trained_eye)
+    assert all("/eval_trained" in l or "/eval_before_trained" in l for l, _ in trained_eye)
+    assert not any("single" in l or "without" in l for l, _ in trained_eye)
+    assert all(a.split == "heldout" for a in parsed if a.greedy_only)
     # the three-column comparison, then the claims read from the same records
     compare = [l for l in lines if l.startswith("python -m parallax.tools.report.compare ")]
     assert len(compare) == 1 and lines[-1].startswith("python -m parallax.tools.report.claims ")

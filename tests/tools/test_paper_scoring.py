@@ -66,3 +66,42 @@ def test_the_trained_eye_on_the_grid_is_scored_from_the_sampled_policy(perturbed
     finally:
         (eval_dir / "eval.json").unlink()
         eval_dir.rmdir()
+
+
+def test_the_report_reads_the_trained_eye_apart_from_the_held_out_photographs(perturbed_run):
+    from parallax.tools.report.runs import load_run
+    from parallax.tools.report.tables import _distance_values
+
+    trained = {}
+    for checkpoint, out, phase in (
+        ("checkpoint_before_perturbation.pt", "eval_before_trained", "before"),
+        ("checkpoint.pt", "eval_trained", "after"),
+    ):
+        result = evaluate(
+            perturbed_run,
+            out=perturbed_run / out,
+            checkpoint_name=checkpoint,
+            distances=[3.5, 5.5, 8.0],
+            between=[],
+            split="train",
+        )
+        trained[phase] = result["distance_sampled"]["by_range"]
+    held_out = evaluate(perturbed_run, out=perturbed_run / "eval_held_out", distances=[3.5])
+    try:
+        run = load_run(perturbed_run)
+        for phase in ("before", "after"):
+            assert run.trained_eye_distance(phase) == trained[phase]
+        # the held-out scoring reads the held-out evaluation only, never the training photographs'
+        assert json.dumps(run.eval_for("after")["distance"]) == json.dumps(held_out["distance"])
+        assert run.eval_for("before") is None
+
+        class OneRun:
+            runs = [run]
+
+        values, source = _distance_values(OneRun(), "after", scoring="trained_eye")
+        assert values == [trained["after"]] and "--split train" in source
+    finally:
+        import shutil
+
+        for out in ("eval_before_trained", "eval_trained", "eval_held_out"):
+            shutil.rmtree(perturbed_run / out)

@@ -41,6 +41,7 @@ from parallax.tools.report.tables import (
     generalisation_table,
     md_table,
     overview_table,
+    scoring_key,
 )
 
 TABLE_CHOICES = ("all", "paper", "ablation")
@@ -169,12 +170,13 @@ def build_report(
             text, data = distance_table(selection, phase)
             md += [text, ""]
             paper_data[key] = data
-        for phase, key in (("before", "table4_queue"), ("after", "table5_queue")):
-            # the paper's probable scoring, where the runs record it
-            text, data = distance_table(selection, phase, scoring="queue")
-            if data["compared"]:
-                md += [text, ""]
-            paper_data[key] = data
+        for scoring in ("queue", "trained_eye"):
+            for phase, number in (("before", 4), ("after", 5)):
+                # the paper's probable scorings, where the runs record them
+                text, data = distance_table(selection, phase, scoring=scoring)
+                if data["compared"]:
+                    md += [text, ""]
+                paper_data[scoring_key(number, scoring)] = data
         if selection.notes:
             md += (
                 ["Choices where several groups fit a cell:", ""]

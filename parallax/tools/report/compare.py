@@ -27,7 +27,7 @@ from pathlib import Path
 from parallax.tools.report import paper_results as paper
 from parallax.tools.report.groups import Stat, json_ready
 from parallax.tools.report.runs import ReportError, total_error
-from parallax.tools.report.tables import md_table
+from parallax.tools.report.tables import SCORINGS, md_table, scoring_key
 
 
 @dataclass(frozen=True)
@@ -87,14 +87,15 @@ def _load(path: str | Path) -> dict:
     return result
 
 
-#: The distance tables under each scoring: ours (held-out photographs) and the paper's probable
-#: protocol (the network on its own queue at the end of each phase).
-DISTANCE_KEYS = {"held_out": ("table4", "table5"), "queue": ("table4_queue", "table5_queue")}
+#: The distance tables under each scoring (parallax.tools.report.tables.SCORINGS): ours
+#: (held-out photographs) and the paper's probable protocol (the network on its own queue, the
+#: eye as trained), at the end of each phase.
+DISTANCE_KEYS = {s: (scoring_key(4, s), scoring_key(5, s)) for s in SCORINGS}
 
 _NOT_RUN: dict = {
     "paper": {
         k: {"cells": {}, "rows": {}}
-        for k in ("table2", "table3", *DISTANCE_KEYS["held_out"], *DISTANCE_KEYS["queue"])
+        for k in ("table2", "table3", *(k for keys in DISTANCE_KEYS.values() for k in keys))
     },
     "groups": [],
 }
@@ -329,17 +330,17 @@ def readme_table(data: dict) -> str:
                 [f"{what}, {name}", _published_range(table, column)]
                 + [_eye_range(data[key], column, f) for f in families]
             )
-    for key, what in (
-        ("table4", "Table 4: distance error"),
-        ("table5", "Table 5: after it"),
-        ("table4_queue", "Table 4 on its own queue"),
-        ("table5_queue", "Table 5 on its own queue"),
-    ):
+    tables = [("table4", "Table 4: distance error"), ("table5", "Table 5: after it")]
+    for scoring, words in SCORINGS.items():
+        if scoring != "held_out":
+            tables += [(scoring_key(4, scoring), f"Table 4, {words}")]
+            tables += [(scoring_key(5, scoring), f"Table 5, {words}")]
+    for key, what in tables:
         table = data.get(key, {})
-        if key.endswith("_queue") and not any(
+        if key not in DISTANCE_KEYS["held_out"] and not any(
             cells["total"][f]["n"] for cells in table.values() for f in families
         ):
-            continue  # no family recorded the paper's scoring yet
+            continue  # no family recorded this scoring of the paper's yet
         for row_name, cells in table.items():
             total = cells["total"]
             rows.append(
@@ -425,12 +426,26 @@ def compare(
         ("table5", 5, "the same after the perturbation", distance_table),
         (
             "table4_queue",
-            "4 (queue)",
+            "4 (on its own queue)",
             "distance-estimation error (%) under the paper's probable scoring (the network on "
             "its own queue at the end of the phase), before",
             distance_table,
         ),
-        ("table5_queue", "5 (queue)", "the same after the perturbation", distance_table),
+        ("table5_queue", "5 (on its own queue)", "the same after the perturbation", distance_table),
+        (
+            "table4_trained_eye",
+            "4 (the eye as trained)",
+            "distance-estimation error (%) under the paper's probable scoring (the eye as it "
+            "trained, its learning policy on the training photographs at every grid distance, "
+            "read by the network as the phase left it), before",
+            distance_table,
+        ),
+        (
+            "table5_trained_eye",
+            "5 (the eye as trained)",
+            "the same after the perturbation",
+            distance_table,
+        ),
     ):
         text, cells, worse, compared = table(families, key)
         md += [f"**Table {number}** — {what}.", "", text, ""]
@@ -452,8 +467,7 @@ def compare(
             [
                 "family",
                 "eye cells, Tables 2–3",
-                "distance totals, Tables 4–5 (held-out photographs)",
-                "distance totals, Tables 4–5 (on its own queue)",
+                *(f"distance totals, Tables 4–5 ({words})" for words in SCORINGS.values()),
             ],
             [
                 [family, *(f"{k} of {n}" for k, n in counts.values())]

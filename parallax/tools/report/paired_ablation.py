@@ -12,6 +12,8 @@ seeds both have, measure by measure, before and after §5's perturbation:
   photograph where the evaluations keep each trial's error, else distance by distance;
 - ``queue``: the network on its own queue at the end of the phase (the paper's probable scoring
   of Tables 4–5; queues of another size hold other vectors, so this pairs seed totals only);
+- ``trained_eye``: the eye as trained on the grid, the learning policy on the training
+  photographs (parallax-eval --split train; the paper's other probable scoring), seed totals;
 - ``online``: the trainer's (or replay's) online error over its window, seed totals.
 
 The difference is (value − baseline), so a negative one is an improvement; its interval is the
@@ -63,9 +65,10 @@ MEASURES: dict[str, Callable[[Run, str], list[float] | None]] = {
     "eye": _eye,
     "held_out": _held_out,
     "queue": lambda run, phase: _total(run.queue_distance(phase)),
+    "trained_eye": lambda run, phase: _total(run.trained_eye_distance(phase)),
     "online": lambda run, phase: _total(run.online_distance(phase)),
 }
-UNITS = {"eye": "°", "held_out": " %", "queue": " %", "online": " %"}
+UNITS = {"eye": "°", "held_out": " %", "queue": " %", "trained_eye": " %", "online": " %"}
 
 
 def _value_text(value) -> str:

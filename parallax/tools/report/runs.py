@@ -126,16 +126,25 @@ class Run:
     def photograph_evals(self) -> list[dict]:
         """The evaluations on the run's own kind of held-out textures (the photographs, unless
         the run trained on others), not those given textures of another kind."""
-        return [e for e in self.evals if not e.get("stimuli_overrides")]
+        return self.evals_on([])
 
-    def evals_on(self, stimuli: list[str]) -> list[dict]:
-        """The evaluations on textures set by these ``env.stimuli.*`` overrides of parallax-eval."""
-        return [e for e in self.evals if list(e.get("stimuli_overrides") or []) == list(stimuli)]
+    def evals_on(self, stimuli: list[str], split: str = "heldout") -> list[dict]:
+        """The evaluations on textures set by these ``env.stimuli.*`` overrides of parallax-eval,
+        of the photographs' ``split`` (parallax-eval --split: heldout, or train)."""
+        return [
+            e
+            for e in self.evals
+            if list(e.get("stimuli_overrides") or []) == list(stimuli)
+            and (e.get("stimuli") or {}).get("split", "heldout") == split
+        ]
 
     # Tables 4–5: the evaluation that measures the model in this phase, if one was made.
-    def eval_for(self, phase: str, stimuli: list[str] | None = None) -> dict | None:
-        """``stimuli``: the evaluations on textures of another kind (parallax-eval's overrides)."""
-        evals = self.photograph_evals if stimuli is None else self.evals_on(stimuli)
+    def eval_for(
+        self, phase: str, stimuli: list[str] | None = None, split: str = "heldout"
+    ) -> dict | None:
+        """``stimuli``: the evaluations on textures of another kind (parallax-eval's overrides);
+        ``split``: those on the photographs of this split."""
+        evals = self.evals_on(stimuli or [], split)
         start = self.perturbation_start
         if phase == "before":
             fits = [
@@ -172,6 +181,13 @@ class Run:
         scoring of Tables 4–5); None for a run that predates it."""
         summary = self.phase_summary(phase)
         return None if summary is None else summary.get("distance_error_queue")
+
+    def trained_eye_distance(self, phase: str) -> dict | None:
+        """The eye as trained, scored on the grid: the learning policy's pans on the training
+        photographs (``parallax-eval --split train``), the network as the phase left it (the
+        paper's probable scoring of Tables 4–5); None without that evaluation."""
+        found = self.eval_for(phase, split="train")
+        return None if found is None else (found.get("distance_sampled") or {}).get("by_range")
 
 
 def _is_run_dir(path: Path) -> bool:

@@ -23,6 +23,22 @@ from parallax.tools.report.selection import PaperSelection
 ONLINE_SOURCE = "online, training textures"
 EVAL_SOURCE = "parallax-eval, held-out textures"
 QUEUE_SOURCE = "the network on its own queue"
+TRAINED_EYE_SOURCE = "parallax-eval --split train, the eye as trained"
+
+#: Tables 4–5's scorings: ours (frozen models on held-out photographs), and two readings of the
+#: paper's probable protocol, which names no held-out set: the network on its own queue S at the
+#: end of the phase, and the eye as trained (its learning policy on the training photographs) at
+#: every grid distance. Each with the words that name it in titles.
+SCORINGS = {
+    "held_out": "held-out photographs",
+    "queue": "on its own queue",
+    "trained_eye": "the eye as trained",
+}
+
+
+def scoring_key(number: int, scoring: str) -> str:
+    """The report's key of Table ``number`` (4 or 5) under ``scoring``: table4, table4_queue…"""
+    return f"table{number}" + ("" if scoring == "held_out" else f"_{scoring}")
 
 
 def md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
@@ -109,10 +125,16 @@ def _distance_values(
 ) -> tuple[list[dict], str] | None:
     """Per-seed errors by range for a phase: parallax-eval's when every seed has one (and
     ``use_eval``), else online; with ``scoring="queue"``, the network on its own queue at the
-    end of the phase (every seed must have it)."""
-    if scoring == "queue":
-        queue = [r.queue_distance(phase) for r in group.runs]
-        return None if any(q is None for q in queue) else (queue, QUEUE_SOURCE)
+    end of the phase, with ``"trained_eye"`` the eye as trained on the grid (every seed must
+    have it)."""
+    if scoring in ("queue", "trained_eye"):
+        read, source = (
+            (lambda r: r.queue_distance(phase), QUEUE_SOURCE)
+            if scoring == "queue"
+            else (lambda r: r.trained_eye_distance(phase), TRAINED_EYE_SOURCE)
+        )
+        values = [read(r) for r in group.runs]
+        return None if any(v is None for v in values) else (values, source)
     evals = [r.eval_for(phase) for r in group.runs]
     if use_eval and all(e is not None for e in evals):
         return [(e.get("distance") or {}).get("by_range") or {} for e in evals], EVAL_SOURCE
@@ -126,8 +148,8 @@ def distance_table(
     selection: PaperSelection, phase: str, scoring: str = "held_out"
 ) -> tuple[str, dict]:
     """Table 4 (before) or Table 5 (after): distance error per range, ours (paper).
-    ``scoring``: held_out (ours: frozen models on held-out photographs, else online) or queue
-    (the paper's probable protocol: the network on its own queue at the end of the phase)."""
+    ``scoring``: a key of :data:`SCORINGS`: held_out (ours: frozen models on held-out
+    photographs, else online), queue or trained_eye (the paper's probable protocol)."""
     published = paper.TABLE4 if phase == "before" else paper.TABLE5
     header = (
         ["Simulation", "group", "n"]
@@ -184,6 +206,14 @@ def distance_table(
             "vectors of its own queue S at the end of the phase (the paper names no held-out "
             "set, and half its totals are not the mean over the 71 grid distances)."
         )
+    elif scoring == "trained_eye":
+        source_text = (
+            f"Scoring: the paper's probable protocol (`{TRAINED_EYE_SOURCE}`): the eye as it "
+            "trained, its learning policy (not the greedy one) on the training photographs at "
+            "every distance of the grid 3.0, 3.1, …, 10.0 m, read by the network as the phase "
+            'left it (the paper: "we test the depth cue … from 3 to 10 meters with 0.1 meter '
+            'interval").'
+        )
     else:
         source_text = (
             f"Source: `{EVAL_SOURCE}` = frozen model on held-out photographs at the distances "
@@ -192,7 +222,8 @@ def distance_table(
             "learning it (last 500), used for every row when any row has no matching eval.json."
         )
     lines = [
-        f"**Table {number}{' (queue)' if scoring == 'queue' else ''}** — average "
+        f"**Table {number}{'' if scoring == 'held_out' else f' ({SCORINGS[scoring]})'}** — "
+        "average "
         f"distance-estimation error (%) per range of distances, {what}. "
         "Cells: ours mean ± sd over seeds (paper); ✓: ours ≤ paper at two decimals. " + source_text,
         "",
