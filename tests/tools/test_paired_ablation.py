@@ -79,3 +79,19 @@ def test_two_runs_of_one_value_and_seed_or_one_value_only_are_refused(tmp_path, 
     with pytest.raises(SystemExit):
         pa.main([str(tmp_path), "--factor", "distance.y"])
     assert "two runs of distance.y=1.0 with seed 0" in capsys.readouterr().err
+
+
+def test_the_held_out_measure_reads_the_evaluation_with_the_most_photographs(tmp_path):
+    from parallax.tools.report.runs import load_run
+
+    folder = tmp_path / "run"
+    _run(folder, 0, 1.0, 0.2, [4.0, 5.0])
+    more = json.loads((folder / "eval.json").read_text())
+    more["textures_per_distance"] = 5
+    more["distance"]["errors"] = [1.0] * 10
+    (folder / "eval_textures5").mkdir()
+    (folder / "eval_textures5" / "eval.json").write_text(json.dumps(more))
+    run = load_run(folder)
+    # the report reads the run's own evaluation; the ablation, the one with five per distance
+    assert run.eval_for("before")["distance"]["errors"] == [4.0, 5.0]
+    assert pa.MEASURES["held_out"](run, "before") == [1.0] * 10

@@ -8,8 +8,9 @@ seeds both have, measure by measure, before and after §5's perturbation:
 
 - ``eye``: the last 100 trials' mean eye error at each lateral position (Tables 2–3), paired
   position by position;
-- ``held_out``: the frozen model on held-out photographs (parallax-eval), paired photograph by
-  photograph where the evaluations keep each trial's error, else distance by distance;
+- ``held_out``: the frozen model on held-out photographs (parallax-eval; of several evaluations,
+  the one with the most photographs per distance), paired photograph by photograph where the
+  evaluations keep each trial's error, else distance by distance;
 - ``queue``: the network on its own queue at the end of the phase (the paper's probable scoring
   of Tables 4–5; queues of another size hold other vectors, so this pairs seed totals only);
 - ``trained_eye``: the eye as trained on the grid, the learning policy on the training
@@ -47,7 +48,7 @@ def _eye(run: Run, phase: str) -> list[float] | None:
 
 
 def _held_out(run: Run, phase: str) -> list[float] | None:
-    found = run.eval_for(phase)
+    found = run.eval_for(phase, most_photographs=True)
     distance = (found or {}).get("distance")
     if not distance:
         return None

@@ -140,10 +140,16 @@ class Run:
 
     # Tables 4–5: the evaluation that measures the model in this phase, if one was made.
     def eval_for(
-        self, phase: str, stimuli: list[str] | None = None, split: str = "heldout"
+        self,
+        phase: str,
+        stimuli: list[str] | None = None,
+        split: str = "heldout",
+        most_photographs: bool = False,
     ) -> dict | None:
         """``stimuli``: the evaluations on textures of another kind (parallax-eval's overrides);
-        ``split``: those on the photographs of this split."""
+        ``split``: those on the photographs of this split. Of several evaluations of the phase's
+        model, the run's own (the first found); with ``most_photographs``, the one with the most
+        photographs per distance (parallax-eval --textures)."""
         evals = self.evals_on(stimuli or [], split)
         start = self.perturbation_start
         if phase == "before":
@@ -157,7 +163,12 @@ class Run:
             return None  # never trained under the perturbation: no "after" model
         else:
             fits = [e for e in evals if e.get("perturbed")]
-        return max(fits, key=lambda e: int(e.get("presentations", 0)), default=None)
+
+        def rank(e: dict) -> tuple[int, int]:
+            photographs = int(e.get("textures_per_distance") or 1) if most_photographs else 0
+            return int(e.get("presentations", 0)), photographs
+
+        return max(fits, key=rank, default=None)
 
     def final_eval(self) -> dict | None:
         """The evaluation of the final checkpoint in its final state (perturbed or not)."""
