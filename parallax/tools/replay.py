@@ -14,7 +14,9 @@ weighting ablations of Table 4 cost seconds per setting instead of a full run ea
 
 Each source run × each combination of the comma-separated values becomes DIR/<run>/<overrides>/
 with config.yaml (the source's, with the overrides applied), summary.json (the source's eye
-metrics, this learner's online distance errors) and, where the source has parallax-eval results
+metrics, this learner's online distance errors), metrics.jsonl (the source's lines with this
+learner's online error and fit statistics: the record a run trained with these settings writes,
+byte for byte), the source's checkpoints with this learner and, where the source has parallax-eval results
 with their eye-movement samples, the same evals with this learner's distance predictions, so
 `parallax-report DIR` tables them like runs. Each of these folders has one writer
 (:mod:`parallax.run_folder`): all are locked before the first is written.
@@ -177,6 +179,7 @@ def replay(
     body = _Body(cfg) if learner.target_source.walks else None
     before_grown = False
     fits: list[tuple[int, float, float]] = []  # (presentation, epochs, stopped by max_fail)
+    lines: list[dict] = []  # the record as training with these settings would have written it
     for record in records[: int(summary["presentations"])]:
         if bar is not None:
             bar.update(1)
@@ -202,6 +205,7 @@ def replay(
             last_stats = stats or last_stats
             if stats.get("trained"):
                 fits.append((tracker.presentation, stats["epochs"], stats["stopped_max_fail"]))
+        lines.append(replayed_line(record, tracker.by_range(), last_stats or {}))
     cut = until_perturbation and summary.get("before_perturbation") is not None
     truths = {
         "before": None if body is None else functools.partial(body.truths, grown=before_grown),
@@ -216,7 +220,7 @@ def replay(
         cut_summary = _cut_at_perturbation(
             cfg, summary, tracker, before_learner, run_dir, overrides
         )
-        return {**cut_summary, "evals": evals, "fits": fits}
+        return {**cut_summary, "evals": evals, "fits": fits, "metrics": lines}
     summary["distance_error"] = tracker.by_range()
     summary["distance_error_queue"] = learner.queue_error()
     if summary.get("before_perturbation") is not None:
@@ -238,7 +242,17 @@ def replay(
         "fits": fits,
         "source": run_dir,
         "checkpoints": {name: parts for name, parts in checkpoints.items() if parts[0] is not None},
+        "metrics": lines,
     }
+
+
+def replayed_line(record: dict, distance_error: dict, stats: dict) -> dict:
+    """A metrics.jsonl line of the source with the replayed distance learner's part: the online
+    error by range and the last fit's statistics (lm_*), where and as the trainer writes them
+    (:class:`parallax.record.PresentationRecord`); the rest is the source's."""
+    line = {k: v for k, v in record.items() if not k.startswith("lm_")}
+    line["distance_error"] = distance_error
+    return {**line, **{f"lm_{k}": v for k, v in stats.items()}}
 
 
 def _replayed_checkpoint(
@@ -454,6 +468,9 @@ def write_replay(result: dict, out_dir: Path) -> None:
             )
             checkpoint.save_atomic(state, out_dir / name)
     write_atomic(out_dir / RUN_CONFIG_NAME, OmegaConf.to_yaml(result["config"], resolve=True))
+    if result.get("metrics"):  # the lines as the trainer writes them (parallax.run_log)
+        metrics = "".join(json.dumps(line) + "\n" for line in result["metrics"])
+        write_atomic(out_dir / METRICS_NAME, metrics)
     summary = finite_or_none(result["summary"])  # strict JSON, as the trainer's
     write_atomic(out_dir / SUMMARY_NAME, json.dumps(summary, indent=2, allow_nan=False) + "\n")
     for relative, evaluation in result.get("evals", {}).items():

@@ -84,6 +84,38 @@ def test_the_best_reward_readout_trains_and_replays_exactly(perturbed_run, tmp_p
         replay(perturbed_run, ["train.distance_readout=peak"])
 
 
+def test_a_replay_writes_the_record_that_training_with_its_settings_writes(perturbed_run, tmp_path):
+    # the replay's metrics.jsonl: the source's lines with the replayed learner's part, byte for
+    # byte the lines of a run trained with those settings (the eye is the same)
+    from parallax.tools.replay import write_replay
+    from tests.conftest import train_tiny_run
+
+    settings = ["distance.input_scaling=none", "distance.warm_start=false"]
+    other = train_tiny_run(
+        tmp_path / "other",
+        [
+            "train.presentations=8",
+            "distance.weighting=true",
+            "distance.y=1.0",
+            "perturbation=rotate_blur",
+            "perturbation.start_fraction=0.5",
+            "train.distance_readout=last",
+            *settings,
+        ],
+    )
+    write_replay(replay(perturbed_run, settings), tmp_path / "replayed")
+    trained = (other / "metrics.jsonl").read_text()
+    assert (tmp_path / "replayed" / "metrics.jsonl").read_text() == trained
+    assert trained != (perturbed_run / "metrics.jsonl").read_text()
+    write_replay(replay(perturbed_run), tmp_path / "as_trained")
+    assert (tmp_path / "as_trained" / "metrics.jsonl").read_text() == (
+        perturbed_run / "metrics.jsonl"
+    ).read_text()
+    # cut at the perturbation: the lines before it
+    cut = replay(perturbed_run, until_perturbation=True)["metrics"]
+    assert [line["presentation"] for line in cut] == [1, 2, 3, 4]
+
+
 def test_until_perturbation_is_the_unperturbed_run(perturbed_run):
     trained = json.loads((perturbed_run / "summary.json").read_text())
     cut = replay(perturbed_run, until_perturbation=True)
