@@ -16,8 +16,9 @@ Each source run × each combination of the comma-separated values becomes DIR/<r
 with config.yaml (the source's, with the overrides applied), summary.json (the source's eye
 metrics, this learner's online distance errors), metrics.jsonl (the source's lines with this
 learner's online error and fit statistics: the record a run trained with these settings writes,
-byte for byte), the source's checkpoints with this learner and, where the source has parallax-eval results
-with their eye-movement samples, the same evals with this learner's distance predictions, so
+byte for byte), the source's checkpoints with this learner and, where the source has
+parallax-eval results with their eye-movement samples, the same evals with this learner's
+distance predictions, so
 `parallax-report DIR` tables them like runs. Each of these folders has one writer
 (:mod:`parallax.run_folder`): all are locked before the first is written.
 """
