@@ -48,7 +48,7 @@ if (( ${#families[@]} == 0 )); then
 fi
 # a dry run also prints each family's wall time on this machine, estimated from the committed
 # parallax-bench report (its single-robot runs side by side; parallax.tools.bench.estimate)
-bench_report=docs/results/bench/cpu_2core_processes.json
+bench_report=docs/results/bench/cpu_2core.json
 if [[ -n "${PARALLAX_DRY_RUN:-}" && -f "$bench_report" ]]; then
   for family in "${families[@]}"; do
     python -m parallax.tools.bench.estimate "$bench_report" "$family" \
