@@ -10,6 +10,10 @@
 #                                eval.json (in RUN/SUBDIR) is missing or older than its checkpoint
 #                                (N_JOBS at a time; log in RUN/SUBDIR/eval.log).
 #   px_report OUT NAME TITLE TABLES SWEEP_DIR...   parallax-report into OUT/NAME.
+#   px_paired NAME FACTOR BASELINE RUNS...   every value of FACTOR against BASELINE as
+#                                paired differences with 95 % intervals and verdicts
+#                                (python -m parallax.tools.report.paired_ablation) into
+#                                $REPORT_ROOT/ablations/NAME_paired.md and .json.
 #   px_distance_source ARGS...   the finished runs whose logged eye movements the distance-learner
 #                                ablations (y, c, weighting) replay, in the array distance_sources:
 #                                $SOURCE if set (a glob, e.g. 'outputs/multirun/reproduce_recipe/*multi_5_20_weighted*'),
@@ -123,6 +127,13 @@ px_report() {
   local out="$1" name="$2" title="$3" tables="$4"
   shift 4
   px_run parallax-report "$@" --out "$out" --name "$name" --title "$title" --tables "$tables"
+}
+
+px_paired() {
+  local name="$1" factor="$2" baseline="$3" report="$report_root/ablations/$1_paired"
+  shift 3
+  px_run python -m parallax.tools.report.paired_ablation "$@" --factor "$factor" \
+    --baseline "$baseline" --markdown "$report.md" --json "$report.json"
 }
 
 # px_ablation NAME TITLE SWEEP_ARGS...   the usual one-sweep ablation: sweep into

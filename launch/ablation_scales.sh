@@ -24,4 +24,14 @@ px_eval "$runs" checkpoint_before_perturbation.pt eval_before "${eval_args[@]}" 
 px_run python -m parallax.tools.report.compact "$runs" --keep replay || status=$?
 px_report "$report_root/ablations" scales.md "Ablation: coarse and fine scales (paper §3.3)" \
   ablation "$runs" || status=$?
+# each scale alone against both, the family's own runs of the set-up, paired by seed
+for name in paper_multi_5_10 recipe_multi_5_20_weighted; do
+  mapfile -t alone < <(px_runs_with "$runs" "experiment=$name")
+  mapfile -t both < <(px_runs_with "$(px_record_dir "${name%%_*}")" "experiment=$name")
+  if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
+    alone=("$runs/<runs of $name>") both=("$(px_record_dir "${name%%_*}")/<runs of $name>")
+  fi
+  px_paired "scales_$name" coder.scales '["coarse", "fine"]' "${alone[@]}" "${both[@]}" \
+    || status=$?
+done
 exit "$status"

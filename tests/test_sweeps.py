@@ -401,9 +401,20 @@ def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_pat
     assert len(trained) == 1 and "coder=coarse\\,fine " in trained[0]
     assert "experiment=paper_multi_5_10\\,recipe_multi_5_20_weighted" in trained[0]
     assert "train.presentations" not in trained[0]
+    # y (weighted at each y, and unweighted) and c, on each family's 5–20 cm weighted runs
     replays = [l for l in lines if l.startswith("parallax-replay ")]
-    assert len(replays) == 3 and all(f"{tmp_path}/recipe/" in l for l in replays)
-    assert len([l for l in lines if l.startswith("parallax-report ")]) == 3
+    assert len(replays) == 6
+    assert sum(f"{tmp_path}/paper/" in l for l in replays) == 3
+    assert sum(f"{tmp_path}/recipe/" in l for l in replays) == 3
+    assert all("distance.y=0.25\\,0.5\\,1\\,2\\,4" in l for l in replays if "y=" in l)
+    assert len([l for l in lines if l.startswith("parallax-report ")]) == 5
+    # every setting against its baseline, paired: both scales, no weighting, the paper's c
+    paired = [l for l in lines if "parallax.tools.report.paired_ablation" in l]
+    baselines = sorted(shlex.split(l)[shlex.split(l).index("--baseline") + 1] for l in paired)
+    assert baselines == sorted(
+        ['["coarse", "fine"]'] * 2 + ["300"] * 2 + ["distance.weighting=false, distance.y=1.0"] * 2
+    )
+    assert lines[-1] == "python -m parallax.tools.report.ablations docs/results "
 
 
 def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):

@@ -13,11 +13,11 @@ from parallax.config.schema import Config
 from parallax.tools.report import paired_ablation as pa
 
 
-def _run(folder, seed: int, y: float, eye: float, errors: list[float]):
+def _run(folder, seed: int, y: float, eye: float, errors: list[float], weighting: bool = True):
     """A finished run without a perturbation: its eye error at two positions and its held-out
     errors photograph by photograph."""
     cfg = OmegaConf.structured(Config)
-    cfg.seed, cfg.distance.y = seed, y
+    cfg.seed, cfg.distance.y, cfg.distance.weighting = seed, y, weighting
     cfg.curriculum.lateral_positions = [0.05, 0.1]
     cfg.perturbation.start_fraction = None
     cfg.train.presentations = 10
@@ -95,3 +95,23 @@ def test_the_held_out_measure_reads_the_evaluation_with_the_most_photographs(tmp
     # the report reads the run's own evaluation; the ablation, the one with five per distance
     assert run.eval_for("before")["distance"]["errors"] == [4.0, 5.0]
     assert pa.MEASURES["held_out"](run, "before") == [1.0] * 10
+
+
+def test_several_settings_make_one_factor_and_name_each_row(tmp_path):
+    # the weighting ablation: each y weighted, and no weighting (at the run's y), the baseline
+    for seed in range(3):
+        _run(tmp_path / f"none_{seed}", seed, 1.0, 0.2, [5.0, 6.0 + seed], weighting=False)
+        _run(tmp_path / f"y1_{seed}", seed, 1.0, 0.2, [4.0, 5.0 + seed])
+        _run(tmp_path / f"y2_{seed}", seed, 2.0, 0.2, [5.0, 6.0 + seed])
+    baseline = "distance.weighting=false, distance.y=1.0"
+    result = pa.ablation([tmp_path], "distance.weighting,distance.y", baseline=baseline)
+    rows = {row["value"]: row["measures"] for row in result["rows"]}
+    assert set(rows) == {
+        baseline,
+        "distance.weighting=true, distance.y=1.0",
+        "distance.weighting=true, distance.y=2.0",
+    }
+    weighted = rows["distance.weighting=true, distance.y=1.0"]["held_out_before"]["difference"]
+    assert weighted["mean"] == pytest.approx(-1.0)
+    with pytest.raises(pa.ReportError, match="no setting distance.why"):
+        pa.ablation([tmp_path], "distance.weighting,distance.why")

@@ -76,6 +76,18 @@ def _value_text(value) -> str:
     return json.dumps(value) if not isinstance(value, str) else value
 
 
+def factor_value(flat: dict, factor: str) -> str:
+    """A run's value of ``factor``: one setting's value, or for several comma-separated keys
+    (e.g. ``distance.weighting,distance.y``) ``key=value`` of each, joined by ", "."""
+    keys = factor.split(",")
+    missing = [key for key in keys if key not in flat]
+    if missing:
+        raise ReportError(f"no setting {missing[0]}")
+    if len(keys) == 1:
+        return _value_text(flat[factor])
+    return ", ".join(f"{key}={_value_text(flat[key])}" for key in keys)
+
+
 def runs_by_value(paths: Sequence[str | Path], factor: str) -> dict[str, dict[int, Run]]:
     """Finished runs below ``paths`` by their value of ``factor`` and their seed."""
     by_value: dict[str, dict[int, Run]] = {}
@@ -84,14 +96,15 @@ def runs_by_value(paths: Sequence[str | Path], factor: str) -> dict[str, dict[in
             run = load_run(run_dir)
             if run.summary is None:
                 continue
-            flat = run.flat
-            if factor not in flat:
-                raise ReportError(f"{run_dir}: no setting {factor}")
-            seeds = by_value.setdefault(_value_text(flat[factor]), {})
+            try:
+                value = factor_value(run.flat, factor)
+            except ReportError as exc:
+                raise ReportError(f"{run_dir}: {exc}") from None
+            seeds = by_value.setdefault(value, {})
             if int(run.seed) in seeds:
                 raise ReportError(
                     f"{run_dir} and {seeds[int(run.seed)].path}: two runs of {factor}="
-                    f"{_value_text(flat[factor])} with seed {run.seed}; give one set-up's runs"
+                    f"{value} with seed {run.seed}; give one set-up's runs"
                 )
             seeds[int(run.seed)] = run
     if len(by_value) < 2:
@@ -166,8 +179,18 @@ def main(argv: list[str] | None = None) -> None:
         description=__doc__.split("\n\n")[0],
     )
     parser.add_argument("runs", nargs="+", help="run, replay or sweep folders")
-    parser.add_argument("--factor", required=True, help="the setting that varies, e.g. distance.y")
-    parser.add_argument("--baseline", default=None, help="its value to compare against")
+    parser.add_argument(
+        "--factor",
+        required=True,
+        help="the setting that varies, e.g. distance.y, or several comma-separated "
+        "(distance.weighting,distance.y)",
+    )
+    parser.add_argument(
+        "--baseline",
+        default=None,
+        help="its value to compare against (several settings: as the rows name them, e.g. "
+        "'distance.weighting=false, distance.y=1.0')",
+    )
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--markdown", type=Path, default=None)
     args = parser.parse_args(argv)
