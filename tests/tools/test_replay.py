@@ -11,24 +11,23 @@ from parallax.config import load_run_config
 from parallax.metrics import finite_or_none
 from parallax.tools.replay import ReplayError, main, parse_sweep, replay
 
+#: 8 presentations, queue c = 3, weighting on, perturbation from presentation 4; the paper's
+#: readout (each trial's last pan), so that a test can replay it with the other one
+PERTURBED = [
+    "train.presentations=8",
+    "distance.weighting=true",
+    "distance.y=1.0",
+    "perturbation=rotate_blur",
+    "perturbation.start_fraction=0.5",
+    "train.distance_readout=last",
+]
+
 
 @pytest.fixture(scope="module")
 def perturbed_run(tmp_path_factory):
     from tests.conftest import train_tiny_run
 
-    # 8 presentations, queue c = 3, weighting on, perturbation from presentation 4; the paper's
-    # readout (each trial's last pan), so that a test can replay it with the other one
-    return train_tiny_run(
-        tmp_path_factory.mktemp("run"),
-        [
-            "train.presentations=8",
-            "distance.weighting=true",
-            "distance.y=1.0",
-            "perturbation=rotate_blur",
-            "perturbation.start_fraction=0.5",
-            "train.distance_readout=last",
-        ],
-    )
+    return train_tiny_run(tmp_path_factory.mktemp("run"), PERTURBED)
 
 
 def test_replay_as_trained_is_bit_identical(perturbed_run):
@@ -59,17 +58,7 @@ def test_the_best_reward_readout_trains_and_replays_exactly(perturbed_run, tmp_p
     # the other readout must give exactly the run trained with it.
     from tests.conftest import train_tiny_run
 
-    best_run = train_tiny_run(
-        tmp_path / "best",
-        [
-            "train.presentations=8",
-            "distance.weighting=true",
-            "distance.y=1.0",
-            "perturbation=rotate_blur",
-            "perturbation.start_fraction=0.5",
-            "train.distance_readout=best_reward",
-        ],
-    )
+    best_run = train_tiny_run(tmp_path / "best", PERTURBED + ["train.distance_readout=best_reward"])
     trained = json.loads((best_run / "summary.json").read_text())
     last = json.loads((perturbed_run / "summary.json").read_text())
     assert trained["mae_per_position"] == last["mae_per_position"]  # the same eye
@@ -91,18 +80,7 @@ def test_a_replay_writes_the_record_that_training_with_its_settings_writes(pertu
     from tests.conftest import train_tiny_run
 
     settings = ["distance.input_scaling=none", "distance.warm_start=false"]
-    other = train_tiny_run(
-        tmp_path / "other",
-        [
-            "train.presentations=8",
-            "distance.weighting=true",
-            "distance.y=1.0",
-            "perturbation=rotate_blur",
-            "perturbation.start_fraction=0.5",
-            "train.distance_readout=last",
-            *settings,
-        ],
-    )
+    other = train_tiny_run(tmp_path / "other", PERTURBED + settings)
     write_replay(replay(perturbed_run, settings), tmp_path / "replayed")
     trained = (other / "metrics.jsonl").read_text()
     assert (tmp_path / "replayed" / "metrics.jsonl").read_text() == trained
