@@ -32,6 +32,8 @@
 #   WITHOUT_ARGS  the same for the without family (default: the grid only)
 #   OTHER_ARGS  parallax-eval options for textures of another kind (default: the grid 3.0, 3.2,
 #               …, 10.0 m, greedy only), on the 5–20 cm models of every family but without
+#   BENCH_REPORT  the parallax-bench --processes report a dry run estimates the wall time from
+#               (default docs/results/bench/cpu_2core.json; empty: none)
 #   TRAINED_ARGS  parallax-eval options of the eye as trained, the paper's probable scoring of
 #               Tables 4–5 (default: the training photographs on the grid, the learning policy
 #               beside the greedy one), on the multiple-position models of every family but
@@ -47,9 +49,10 @@ if (( ${#families[@]} == 0 )); then
   families=(recipe paper unsourced without)
 fi
 # a dry run also prints each family's wall time on this machine, estimated from the committed
-# parallax-bench report (its single-robot runs side by side; parallax.tools.bench.estimate)
-bench_report=docs/results/bench/cpu_2core.json
-if [[ -n "${PARALLAX_DRY_RUN:-}" && -f "$bench_report" ]]; then
+# parallax-bench report (its single-robot runs side by side; parallax.tools.bench.estimate), or
+# from BENCH_REPORT (empty: no estimate)
+bench_report="${BENCH_REPORT-docs/results/bench/cpu_2core.json}"
+if [[ -n "${PARALLAX_DRY_RUN:-}" && -n "$bench_report" && -f "$bench_report" ]]; then
   for family in "${families[@]}"; do
     python -m parallax.tools.bench.estimate "$bench_report" "$family" \
       --seeds "$(tr ',' '\n' <<< "${SEEDS:-0,1,2}" | wc -l)" \

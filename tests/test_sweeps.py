@@ -257,7 +257,8 @@ def reproduction_dry_run(tmp_path_factory) -> tuple[Path, list[str]]:
     """launch/reproduce.sh's commands with one extra override, printed once for the tests that
     read them (it composes every experiment file, tens of seconds)."""
     root = tmp_path_factory.mktemp("reproduce")
-    return root, _dry_run("reproduce.sh", root, "train.presentations=7")
+    # without the wall-time estimate, which composes every file again (tests/tools/test_bench.py)
+    return root, _dry_run("reproduce.sh", root, "train.presentations=7", BENCH_REPORT="")
 
 
 @pytest.mark.parametrize("script", LAUNCH_SCRIPTS)
@@ -341,10 +342,17 @@ def test_the_reproduction_does_not_train_a_finished_run_again(tmp_path):
         )
     (tmp_path / "recipe" / "done" / "summary.json").write_text("{}")
     (tmp_path / "recipe" / "smoke" / "summary.json").write_text("{}")
-    trained = [l for l in _dry_run("reproduce.sh", tmp_path, "recipe") if "parallax-train" in l]
+    # the dry run also estimates the family's wall time from a bench report's process cases
+    report = tmp_path / "bench.json"
+    two = {"processes": 2, "steps_per_second": 400.0}
+    report.write_text(json.dumps({"processes": {"this code": {"two": two}}}))
+    lines = _dry_run("reproduce.sh", tmp_path, "recipe", BENCH_REPORT=str(report))
+    trained = [l for l in lines if "parallax-train" in l]
     headline = [l for l in trained if "experiment=recipe_multi_5_20_weighted " in l]
     assert len(headline) == 1 and headline[0].rstrip().endswith("seed=0\\,1\\,2\\,4"), trained
     assert len(trained) == 2  # the other recipe files, all three seeds
+    assert any(l.startswith("recipe: ") and "robot-iterations" in l for l in lines), lines
+    assert any("400.0 robot-iterations/s in all" in l and l.endswith("hours") for l in lines)
 
 
 @pytest.mark.slow

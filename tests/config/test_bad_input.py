@@ -48,7 +48,14 @@ COMMAND_LINES = [
 ]
 
 
-@pytest.mark.parametrize("override, named", COMMAND_LINES, ids=[c[0] for c in COMMAND_LINES])
+#: Of those, the ones run as whole parallax-train processes: a type Hydra's schema refuses, a
+#: file that cannot be read and a choice Hydra cannot compose (the rest are the same path,
+#: checked in-process below).
+WHOLE_COMMANDS = [c for c in COMMAND_LINES if c[0].split("=")[0] in ("train.presentations",
+    "env.stimuli.dir", "experiment") and "nonexistent" not in c[0]]  # fmt: skip
+
+
+@pytest.mark.parametrize("override, named", WHOLE_COMMANDS, ids=[c[0] for c in WHOLE_COMMANDS])
 def test_parallax_train_stops_with_one_line(tmp_path, override, named):
     images = _images_that_are_text(tmp_path / "images")
     override, named = override.format(images=images), named.format(images=images)
@@ -211,6 +218,18 @@ def test_bad_values_are_named_in_one_line(overrides, named):
     line = check_command_line(overrides.split())
     assert line is not None and line.startswith(named), line
     assert "\n" not in line and len(line) < 300, line
+
+
+@pytest.mark.parametrize("override, named", COMMAND_LINES, ids=[c[0] for c in COMMAND_LINES])
+def test_each_bad_command_line_is_named_in_one_line_before_anything_is_written(
+    tmp_path, override, named
+):
+    images = _images_that_are_text(tmp_path / "images")
+    override, named = override.format(images=images), named.format(images=images)
+    line = check_command_line([override, f"hydra.run.dir={tmp_path / 'run'}"])
+    assert line is not None and line.startswith(named), line
+    assert "\n" not in line, line  # one line, however long the list of choices it gives
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["images"]
 
 
 def test_the_stimulus_checks_alone_name_the_value():

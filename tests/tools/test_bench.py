@@ -48,10 +48,13 @@ def test_ceiling_is_every_core_busy_with_the_coder_at_its_bound():
     assert bench.usable_cores() >= 1
 
 
-def test_bench_main_prints_a_table_and_json(tmp_path, capsys):
+def test_bench_main_prints_a_table_and_json(tmp_path, capsys, tiny_overrides):
     out = tmp_path / "bench.json"
+    # the shrunken world, coder and learner: this test reads the report's shape, not its speed
+    shrunken = [o for o in tiny_overrides if o.startswith(("env.", "coder.", "distance."))]
     bench.main(
         ["--no-components", "--robots", "1", "2", "1", "--presentations", "1", "--json", str(out)]
+        + shrunken
     )
     printed = capsys.readouterr().out
     assert "[end to end]" in printed and "[roofline cpu]" in printed

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 
@@ -51,15 +49,15 @@ def test_jittered_trials_count_too() -> None:
     ("argument", "message"),
     [("--robots=0", "--robots=[0]"), ("--threshold=0", "--threshold=0.0"), ("--budget=0", "0")],
 )
-def test_bad_arguments_get_one_line_and_exit_2(argument: str, message: str, tmp_path) -> None:
+def test_bad_arguments_get_one_line_and_exit_2(
+    argument: str, message: str, tmp_path, capsys
+) -> None:
     out = tmp_path / "report.json"
-    result = subprocess.run(
-        [sys.executable, "-m", "parallax.tools.bench.learning", argument, "--json", str(out)],
-        capture_output=True,
-        text=True,
-    )
-    assert result.returncode == 2 and message in result.stderr
-    assert len(result.stderr.strip().splitlines()) == 1 and not out.exists()
+    with pytest.raises(SystemExit) as stop:
+        learning.main([argument, "--json", str(out)])
+    error = capsys.readouterr().err
+    assert stop.value.code == 2 and message in error
+    assert len(error.strip().splitlines()) == 1 and not out.exists()
 
 
 def test_a_written_report_prints_again(tmp_path, capsys) -> None:

@@ -14,6 +14,7 @@ revision given to ``--compare``). A curriculum in stages is counted at its final
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 from pathlib import Path
@@ -25,6 +26,7 @@ from parallax.tools.experiments import plan
 EXPERIMENTS = Path(__file__).resolve().parents[3] / "conf" / "experiment"
 
 
+@functools.cache
 def robot_iterations(name: str) -> int:
     """One run's robot-iterations of the experiment file ``name``."""
     cfg = compose([f"experiment={name}"])
