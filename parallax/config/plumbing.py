@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import hashlib
 import re
 from collections.abc import Sequence
@@ -66,7 +67,22 @@ def register_resolvers() -> None:
 
 def compose(overrides: Sequence[str] = (), with_hydra: bool = False) -> DictConfig:
     """The composed configuration for these overrides, as `parallax-train` would see it; with
-    ``with_hydra``, Hydra's own node too (``hydra.run.dir`` & co.; see :func:`without_hydra`)."""
+    ``with_hydra``, Hydra's own node too (``hydra.run.dir`` & co.; see :func:`without_hydra`).
+
+    Without Hydra's node, the same overrides are composed once per process (the config files do
+    not change while parallax runs; Hydra takes about half a second a composition) and each
+    caller gets its own copy."""
+    if with_hydra:  # Hydra's node holds the working directory and the time: composed each time
+        return _hydra_compose(tuple(overrides), with_hydra=True)
+    return copy.deepcopy(_composed(tuple(overrides)))
+
+
+@functools.lru_cache(maxsize=128)
+def _composed(overrides: tuple[str, ...]) -> DictConfig:
+    return _hydra_compose(overrides, with_hydra=False)
+
+
+def _hydra_compose(overrides: tuple[str, ...], with_hydra: bool) -> DictConfig:
     from hydra import compose as hydra_compose
     from hydra import initialize_config_module
     from hydra.core.global_hydra import GlobalHydra
