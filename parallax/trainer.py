@@ -188,9 +188,7 @@ class Trainer:
         self.presentation, self.steps = int(state["presentation"]), int(state["steps"])
         self.wall_time = float(state["wall_time"])
         # a phase lengthened before the perturbation: its summary is taken again at the new start
-        reached_start = self.perturbation_start is not None
-        reached_start = reached_start and self.presentation >= self.perturbation_start
-        self.before_perturbation = state["before_perturbation"] if reached_start else None
+        self.before_perturbation = state["before_perturbation"] if self.perturbed else None
         self.last_distance_stats = state["last_distance_stats"]
         checkpoint.set_global_rng_state(state["global_rng"])
         self.keep_latest, self.saved = path == self.checkpoint_path, (path, self.presentation)

@@ -17,7 +17,7 @@ from parallax.tools.report.groups import (
     format_value,
     json_ready,
 )
-from parallax.tools.report.runs import total_error
+from parallax.tools.report.runs import Run, total_error
 from parallax.tools.report.selection import PaperSelection
 
 ONLINE_SOURCE = "online, training textures"
@@ -33,6 +33,14 @@ SCORINGS = {
     "held_out": "held-out photographs",
     "queue": "on its own queue",
     "trained_eye": "the eye as trained",
+}
+
+
+#: The paper's probable scorings: how a run gives its errors by range for a phase, and the source
+#: named in the table.
+PAPER_SCORINGS = {
+    "queue": (Run.queue_distance, QUEUE_SOURCE),
+    "trained_eye": (Run.trained_eye_distance, TRAINED_EYE_SOURCE),
 }
 
 
@@ -127,13 +135,9 @@ def _distance_values(
     ``use_eval``), else online; with ``scoring="queue"``, the network on its own queue at the
     end of the phase, with ``"trained_eye"`` the eye as trained on the grid (every seed must
     have it)."""
-    if scoring in ("queue", "trained_eye"):
-        read, source = (
-            (lambda r: r.queue_distance(phase), QUEUE_SOURCE)
-            if scoring == "queue"
-            else (lambda r: r.trained_eye_distance(phase), TRAINED_EYE_SOURCE)
-        )
-        values = [read(r) for r in group.runs]
+    if scoring in PAPER_SCORINGS:
+        read, source = PAPER_SCORINGS[scoring]
+        values = [read(r, phase) for r in group.runs]
         return None if any(v is None for v in values) else (values, source)
     evals = [r.eval_for(phase) for r in group.runs]
     if use_eval and all(e is not None for e in evals):
