@@ -6,7 +6,9 @@
 # 5–10 cm only, as they change nothing at a single position), another of the AEC code's
 # step-size sets (step_sizes=NAME) or another of the dictionary rates η those sets carry
 # (dictionary_rate=NAME); the switches that change the distance learner only
-# (open_setting=plain_lm, new_network, first_scaling) by parallax-replay of the lineage's runs;
+# (open_setting=plain_lm and matlab_network; the family's network, without input processing and
+# built anew at every fit, where the study keeps MATLAB's, and each of its two choices alone) by
+# parallax-replay of the lineage's runs;
 # the records compacted as committed (the lineage's keep what the replays read, the switches' what
 # the table reads); then the table, docs/results/sensitivity.md and .json. Resumable (fixed
 # folders, like launch/reproduce.sh).
@@ -59,7 +61,10 @@ fi
 if (( ${#lineage[@]} )); then
   px_run python -m parallax.tools.report.compact --keep replay "${lineage[@]}" || status=$?
   px_run parallax-replay "${lineage[@]}" --out "$replays" \
-    open_setting=plain_lm,new_network,first_scaling || status=$?
+    open_setting=plain_lm,matlab_network || status=$?
+  px_run parallax-replay "${lineage[@]}" --out "$replays" distance.warm_start=false || status=$?
+  px_run parallax-replay "${lineage[@]}" --out "$replays" \
+    distance.input_scaling=none distance.warm_start=true,false || status=$?
 fi
 table_overrides=()
 for arg in "$@"; do table_overrides+=("--override=$arg"); done

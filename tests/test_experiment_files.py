@@ -143,7 +143,8 @@ def test_the_paper_family_uses_nothing_beyond_the_paper_and_its_lineage(setup):
     assert flat["policy.actor_projection_radius"] is None
     assert flat["policy.initial_actor_range"] == 0.4
     assert flat["policy.initial_critic_range"] == 0.05
-    assert flat["distance.input_scaling"] == "per_input"
+    assert flat["distance.input_scaling"] == "none"
+    assert flat["distance.warm_start"] is False
     assert flat["distance.validation_fraction"] == 0.15
     assert flat["distance.test_fraction"] == 0.15
     assert flat["distance.max_fail"] == 6
@@ -273,8 +274,13 @@ OPEN_SETTINGS = {
     "normalised_features": {"policy.feature_norm"},
     "reset_step_learnt": {"policy.learn_reset_step"},
     "pan_kept": {"env.pan_reset"},
-    "new_network": {"distance.warm_start"},
-    "first_scaling": {"distance.keep_first_scaling"},
+    "continued_network": {"distance.warm_start"},
+    "per_input_scaling": {"distance.input_scaling"},
+    "matlab_network": {
+        "distance.input_scaling",
+        "distance.warm_start",
+        "distance.keep_first_scaling",
+    },
     "plain_lm": {
         "distance.validation_fraction",
         "distance.test_fraction",

@@ -459,8 +459,13 @@ def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
         setups = "sensitivity_multi_5_10" if one_position else both
         assert f"experiment={setups} " in line
         assert "seed=0\\,1\\,2" in line and line.rstrip().endswith("train.presentations=7")
-    (replay,) = [l for l in lines if l.startswith("parallax-replay ")]
-    assert replay.rstrip().endswith("open_setting=plain_lm\\,new_network\\,first_scaling")
+    replays = [l for l in lines if l.startswith("parallax-replay ")]
+    assert [r.rstrip().split("--out ")[1].split(" ", 1)[1] for r in replays] == [
+        "open_setting=plain_lm\\,matlab_network",
+        "distance.warm_start=false",
+        "distance.input_scaling=none distance.warm_start=true\\,false",
+    ]
+    replay = replays[0]
     # the records as committed: the switches' thinned to what the table reads, the lineage's
     # keeping the eye-movement vectors that its replays (just after) read
     compacted = [l for l in lines if "parallax.tools.report.compact" in l]

@@ -196,6 +196,28 @@ def test_scale_runs_are_read_when_present(records, tmp_path):
     assert all(row["families"]["ours"]["seeds"] == [0, 1, 2] for row in scales["comparisons"])
 
 
+def test_a_run_with_settings_beyond_its_experiment_stands_for_no_set_up(records):
+    # singles trained with another network: `parallax-train experiment=paper_single_5` gives
+    # their eye (the distance learner never acts on it) but not their distance errors; singles
+    # of another eye stand for nothing
+    def launched_with(override, family):
+        for folder in (records / family).glob(f"experiment={family}_single_*"):
+            overrides = folder / ".hydra" / "overrides.yaml"
+            listed = OmegaConf.to_container(OmegaConf.load(overrides))
+            overrides.write_text(OmegaConf.to_yaml([override, *listed]))
+
+    before = cl.claims(records)
+    launched_with("distance.warm_start=true", "paper")
+    launched_with("policy.discount=1.0", "recipe")
+    result = cl.claims(records)
+    assert _claim(result, 4)["verdict"] == {
+        "paper_family": _claim(before, 4)["verdict"]["paper_family"],  # the eye: still read
+        "ours": "runs missing",
+    }
+    assert _claim(before, 1)["verdict"]["paper_family"] != "runs missing"
+    assert _claim(result, 1)["verdict"]["paper_family"] == "runs missing"  # distance vs singles
+
+
 def test_the_readme_list_is_written_between_its_markers(records, tmp_path):
     readme = tmp_path / "README.md"
     readme.write_text(f"# x\n\n{cl.README_BEGIN}\nold\n{cl.README_END}\ntail\n")

@@ -5,7 +5,9 @@ The runs are those of ``experiment=sensitivity_<setup>`` (paper_<setup> in a sho
 with at most one switch: an open setting of ``conf/open_setting/`` (``+open_setting=xi_1``),
 another of the lineage's step-size sets (``step_sizes=chong``) or another of its dictionary
 rates η (``dictionary_rate=alex_p``); ``parallax-replay`` of the lineage's runs gives the rows
-that change the distance learner only (``plain_lm``, ``new_network``, ``first_scaling``). A run
+that change the distance learner only: ``plain_lm``, MATLAB's first scaling kept
+(``matlab_network``), and the family's own network (no input processing, built anew at every
+fit; the study's lineage keeps MATLAB's defaults) with each of its two choices alone. A run
 belongs to the row whose composed config it equals, its seed and the settings that change no
 result aside, so that a run of other settings is never counted in a row.
 
@@ -51,8 +53,10 @@ ROWS = {
     "η Lukas (0.1)": ["dictionary_rate=lukas"],
     "η Alex P (0.5)": ["dictionary_rate=alex_p"],
     "plain LM (replay)": ["+open_setting=plain_lm"],
-    "new network each fit (replay)": ["+open_setting=new_network"],
-    "first fit's scaling kept (replay)": ["+open_setting=first_scaling"],
+    "first fit's scaling kept (replay)": ["+open_setting=matlab_network"],
+    "new network each fit (replay)": ["distance.warm_start=false"],
+    "no input scaling (replay)": ["distance.input_scaling=none"],
+    "the family's network (replay)": ["distance.input_scaling=none", "distance.warm_start=false"],
 }
 #: Settings a run's row does not depend on: its seed, those filled at run time, and those that
 #: change no result.
@@ -86,7 +90,7 @@ def row_settings(overrides: tuple[str, ...]) -> dict[tuple[str, str], dict]:
 
 
 def critic_peak(path: Path) -> float | None:
-    """The largest finite mean |v·φ| a run logged (None for a replay, which logs no policy)."""
+    """The largest finite mean |v·φ| a run logged (a replay: its source's; None if none)."""
     scales = [r.get("policy_critic_scale") for r in read_metrics(path)]
     scales = [s for s in scales if isinstance(s, (int, float)) and math.isfinite(s)]
     return max(scales) if scales else None

@@ -36,6 +36,7 @@ import numpy as np
 
 from parallax.distance.metrics import RANGES
 from parallax.tools.analysis.time_to_learn import first_learnt, recent_mae_per_position
+from parallax.tools.replay import REPLAYABLE_PREFIXES as DISTANCE_ONLY_PREFIXES
 from parallax.tools.report.runs import ReportError, Run, find_run_dirs, load_run
 
 #: Where the reproduction keeps its runs (launch/reproduce.sh's RECORD_ROOT).
@@ -96,13 +97,27 @@ class Records:
             self._folders[name] = [r for r in runs if r.summary is not None]
         return self._folders[name]
 
-    def runs(self, setup: Setup, prefix: str) -> dict[int, Run]:
-        """The set-up's finished runs by seed; empty when there are none (not yet trained)."""
+    @staticmethod
+    def _only_its_overrides(run: Run, setup: Setup, eye_only: bool) -> bool:
+        """Whether the run was launched with nothing beyond its experiment, its seed and the
+        set-up's own settings; for a measure of the eye (``eye_only``), settings of the distance
+        learner aside, as they never change the eye (parallax-replay)."""
+        allowed = {key for key, _ in setup.settings} | {o.split("=", 1)[0] for o in setup.overrides}
+        keys = {o.split("=", 1)[0].lstrip("+") for o in run.overrides}
+        if eye_only:
+            keys = {k for k in keys if not k.startswith(DISTANCE_ONLY_PREFIXES)}
+        return keys - {"experiment", "seed"} <= allowed
+
+    def runs(self, setup: Setup, prefix: str, eye_only: bool = False) -> dict[int, Run]:
+        """The set-up's finished runs by seed; empty when there are none (not yet trained).
+        ``eye_only``: for a measure that reads the eye alone."""
         experiment = setup.experiment_of(prefix)
         found: dict[int, Run] = {}
         for run in self.folder(setup.folder_of(prefix)):
             if experiment is not None and experiment_name(run) != experiment:
                 continue
+            if experiment is not None and not self._only_its_overrides(run, setup, eye_only):
+                continue  # the experiment with other settings: not what its command gives
             flat = run.flat
             if not all(_same(flat.get(key), value) for key, value in setup.settings):
                 continue
@@ -164,6 +179,7 @@ def held_out(phase: str, distance_range: str | None = None) -> Measure:
             if low <= float(d) and (float(d) <= high if included else float(d) < high)
         } or None
 
+    read.reads_distance = True
     return read
 
 
@@ -174,6 +190,7 @@ def online(phase: str) -> Measure:
         total = (run.online_distance(phase) or {}).get("total")
         return None if total is None or not math.isfinite(float(total)) else {"total": total}
 
+    read.reads_distance = True
     return read
 
 
@@ -220,7 +237,8 @@ class Side:
     ) -> tuple[dict[int, dict[str, float]], list[Run], str | None]:
         """{seed: {key: value}} over the seeds every set-up has a value for, the runs read, and
         (``best``) the experiment chosen."""
-        per_setup = [records.runs(setup, prefix) for setup in self.setups]
+        eye_only = not getattr(self.measure, "reads_distance", False)
+        per_setup = [records.runs(setup, prefix, eye_only) for setup in self.setups]
         runs = [run for found in per_setup for run in found.values()]
         if self.best:
             measured = [_measured([found], self.measure) for found in per_setup]

@@ -330,18 +330,8 @@ def readme_table(data: dict) -> str:
                 [f"{what}, {name}", _published_range(table, column)]
                 + [_eye_range(data[key], column, f) for f in families]
             )
-    tables = [("table4", "Table 4: distance error"), ("table5", "Table 5: after it")]
-    for scoring, words in SCORINGS.items():
-        if scoring != "held_out":
-            tables += [(scoring_key(4, scoring), f"Table 4, {words}")]
-            tables += [(scoring_key(5, scoring), f"Table 5, {words}")]
-    for key, what in tables:
-        table = data.get(key, {})
-        if key not in DISTANCE_KEYS["held_out"] and not any(
-            cells["total"][f]["n"] for cells in table.values() for f in families
-        ):
-            continue  # no family recorded this scoring of the paper's yet
-        for row_name, cells in table.items():
+    for key, what in (("table4", "Table 4: distance error"), ("table5", "Table 5: after it")):
+        for row_name, cells in data.get(key, {}).items():
             total = cells["total"]
             rows.append(
                 [f"{what}, {row_name}", f"{total['paper']:.2f} %"]
@@ -352,7 +342,32 @@ def readme_table(data: dict) -> str:
                     for f in families
                 ]
             )
+    for scoring, words in SCORINGS.items():
+        totals = [
+            cells["total"] for key in DISTANCE_KEYS[scoring] for cells in data.get(key, {}).values()
+        ]
+        if scoring == "held_out" or not any(t[f]["n"] for t in totals for f in families):
+            continue  # held out: the rows above; else no family recorded this scoring yet
+        rows.append(
+            [f"Tables 4–5 {words}: the six totals", _total_range(totals, "paper")]
+            + [_total_range(totals, f) for f in families]
+        )
     return md_table(header, rows)
+
+
+def _total_range(totals: list[dict], family: str) -> str:
+    """The range of the totals' means (the paper's printed totals), with the seeds behind them."""
+    if family == "paper":
+        low, high = min(t["paper"] for t in totals), max(t["paper"] for t in totals)
+        return f"{low:.2f}–{high:.2f} %"
+    cells = [t[family] for t in totals if t[family]["n"]]
+    if not cells:
+        return "not yet run"
+    means, seeds = [c["mean"] for c in cells], sorted({c["n"] for c in cells})
+    n = f"n={seeds[0]}" if len(seeds) == 1 else f"n={seeds[0]}–{seeds[-1]}"
+    low, high = f"{min(means):.2f}", f"{max(means):.2f}"
+    span = low if low == high else f"{low}–{high}"
+    return f"{span} % ({len(cells)} of {len(totals)}, {n})"
 
 
 def write_readme_table(
