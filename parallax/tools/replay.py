@@ -21,6 +21,14 @@ parallax-eval results with their eye-movement samples, the same evals with this 
 distance predictions, so
 `parallax-report DIR` tables them like runs. Each of these folders has one writer
 (:mod:`parallax.run_folder`): all are locked before the first is written.
+
+    parallax-replay RUN --out DIR --as-launched distance.warm_start=false
+
+writes the replay as the run `parallax-train` writes when launched with the source's own
+overrides less the replayed settings (and less any the rest already give): DIR/<those
+overrides>/ with their .hydra/overrides.yaml and no replay provenance in its summary. It is
+refused unless that launch composes exactly the replay's settings, e.g. a run trained with a
+distance setting that its experiment file has since changed, replayed with the file's value.
 """
 
 from __future__ import annotations
@@ -45,10 +53,14 @@ from parallax import checkpoint
 from parallax.checkpoint import BEFORE_PERTURBATION_NAME, CHECKPOINT_NAME
 from parallax.config import (
     CONFIG_MODULE,
+    RESULT_NEUTRAL_KEYS,
     RUN_CONFIG_NAME,
+    RUN_TIME_KEYS,
+    compose,
     flatten,
     load_run_config,
     run_name,
+    run_settings,
 )
 from parallax.metrics import DistanceErrorTracker, finite_or_none
 from parallax.parts import body_walkers, distance_learner, worlds
@@ -57,6 +69,7 @@ from parallax.run_folder import RunLock, RunLocked, write_atomic
 from parallax.tools.console import footer, header, progress
 from parallax.tools.report.groups import mean_sd
 from parallax.tools.report.runs import (
+    HYDRA_OVERRIDES,
     METRICS_NAME,
     SUMMARY_NAME,
     ReportError,
@@ -452,10 +465,56 @@ def check_checkpoints(sources: Iterable[Path]) -> None:
                     ) from None
 
 
-def write_replay(result: dict, out_dir: Path) -> None:
+def _result_settings(cfg: Any) -> dict:
+    """The settings a run's results depend on (its seed included)."""
+    flat = run_settings(OmegaConf.to_container(cfg, resolve=True))
+    return {k: v for k, v in flat.items() if k not in RUN_TIME_KEYS | RESULT_NEUTRAL_KEYS}
+
+
+def launched_as(source: Path, combo: Sequence[str], cfg: DictConfig) -> list[str]:
+    """The overrides with which `parallax-train` writes the replay of ``source`` under ``combo``
+    (whose config is ``cfg``): the source's own, less the replayed settings and less those the
+    rest already give (its experiment and seed kept). ReplayError unless they compose ``cfg``."""
+    path = source / HYDRA_OVERRIDES
+    if not path.is_file():
+        raise ReplayError(f"{source}: no {HYDRA_OVERRIDES}, so no launch to replay it as")
+    listed = [str(o) for o in (OmegaConf.to_container(OmegaConf.load(path)) or [])]
+    replayed = {item.partition("=")[0] for item in combo}
+    kept = [o for o in listed if o.partition("=")[0].lstrip("+~") not in replayed]
+    wanted = _result_settings(cfg)
+
+    def composes(overrides: list[str]) -> dict:
+        try:
+            return _result_settings(compose(overrides))
+        except Exception as exc:  # Hydra's errors are long: the first line names the override
+            raise ReplayError(f"{path}: {str(exc).splitlines()[0]}") from None
+
+    if composes(kept) != wanted:
+        launch = " ".join(kept) or "(no overrides)"
+        raise ReplayError(
+            f"{source} replayed with {' '.join(combo)}: `parallax-train {launch}` composes other "
+            "settings, so the replay is not a run of that launch"
+        )
+    for override in list(kept):
+        if override.partition("=")[0].lstrip("+~") in ("experiment", "seed"):
+            continue
+        fewer = [o for o in kept if o != override]
+        if composes(fewer) == wanted:
+            kept = fewer
+    return kept
+
+
+def write_replay(result: dict, out_dir: Path, launched: Sequence[str] | None = None) -> None:
     """The replay as a run directory: config, summary, the rescored evals and, for a whole
-    replay, the source's checkpoints with the replayed learner (so parallax-eval runs on it)."""
+    replay, the source's checkpoints with the replayed learner (so parallax-eval runs on it).
+    ``launched``: the overrides of the launch it stands for (:func:`launched_as`), written as
+    Hydra writes them, the summary without the replay's provenance."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    if launched is not None:
+        for key in ("replayed_from", "replay_overrides"):
+            result["summary"].pop(key, None)
+        (out_dir / HYDRA_OVERRIDES).parent.mkdir(exist_ok=True)
+        write_atomic(out_dir / HYDRA_OVERRIDES, OmegaConf.to_yaml(list(launched)))
     for name, (learner, tracker, stats) in result.get("checkpoints", {}).items():
         source = result["source"] / name
         if source.is_file():
@@ -501,6 +560,12 @@ def main(argv: list[str] | None = None) -> None:
         action="store_true",
         help="replay only the presentations before the perturbation, if any (Table 4's models)",
     )
+    parser.add_argument(
+        "--as-launched",
+        action="store_true",
+        help="write each replay as the run of the source's launch less the replayed settings "
+        "(OUT/<its overrides>/, .hydra/overrides.yaml); refused unless that launch composes it",
+    )
     # intermixed: the overrides may come after the options (as launch/ablation_lib.sh puts them)
     args = parser.parse_intermixed_args(argv)
     # Hydra's run directories have '=' in their names: what exists is a path, the rest overrides.
@@ -518,7 +583,18 @@ def main(argv: list[str] | None = None) -> None:
             check_checkpoints(sources)
         # every replayed run folder has one writer (parallax.run_folder): all are locked before
         # the first is written
-        targets = [out / s.name / run_name(",".join(c)) for s in sources for c in combos]
+        launches: dict[tuple[Path, tuple[str, ...]], list[str]] = {}
+        if args.as_launched:
+            if args.until_perturbation:
+                raise ReplayError("--as-launched replays whole runs: drop --until-perturbation")
+            for s in sources:
+                for c in combos:
+                    cfg = load_run_config(s)
+                    cfg.merge_with_dotlist(list(c))
+                    launches[s, tuple(c)] = launched_as(s, c, cfg)
+        targets = [_target(out, s, c, launches) for s in sources for c in combos]
+        if len(set(targets)) < len(targets):
+            raise ReplayError("two replays would be the same launch's run: replay them apart")
         locks = _lock_all(targets)
         totals: dict[
             str, dict[str, list[float]]
@@ -539,11 +615,11 @@ def main(argv: list[str] | None = None) -> None:
         written = []
         for source in sources:
             for combo in combos:
-                target = out / source.name / run_name(",".join(combo))
+                target = _target(out, source, combo, launches)
                 start = bar.n
                 result = replay(source, combo, args.until_perturbation, bar)
                 bar.update(start + lengths[source] - bar.n)  # the rest, if cut at the perturbation
-                write_replay(result, target)
+                write_replay(result, target, launches.get((source, tuple(combo))))
                 written.append(target)
                 scored, label = replay_totals(result), " ".join(combo) or "(as trained)"
                 for what, total in scored.items():
@@ -572,6 +648,15 @@ def main(argv: list[str] | None = None) -> None:
     finally:
         for lock in locks:
             lock.release()
+
+
+def _target(out: Path, source: Path, combo: Sequence[str], launches: dict) -> Path:
+    """A replay's folder: OUT/<source>/<overrides>, or as launched, OUT/<launch's overrides>
+    named as Hydra names a run's folder (sorted, joined by commas)."""
+    launched = launches.get((source, tuple(combo)))
+    if launched is None:
+        return out / source.name / run_name(",".join(combo))
+    return out / run_name(",".join(sorted(launched)))
 
 
 def _lock_all(folders: Sequence[Path]) -> list[RunLock]:

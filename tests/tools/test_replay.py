@@ -6,8 +6,9 @@ from __future__ import annotations
 import json
 
 import pytest
+from omegaconf import OmegaConf
 
-from parallax.config import load_run_config
+from parallax.config import load_run_config, run_name
 from parallax.metrics import finite_or_none
 from parallax.tools.replay import ReplayError, main, parse_sweep, replay
 
@@ -92,6 +93,31 @@ def test_a_replay_writes_the_record_that_training_with_its_settings_writes(pertu
     # cut at the perturbation: the lines before it
     cut = replay(perturbed_run, until_perturbation=True)["metrics"]
     assert [line["presentation"] for line in cut] == [1, 2, 3, 4]
+
+
+def test_a_replay_as_launched_is_the_run_its_launch_trains(perturbed_run, tmp_path, capsys):
+    # a run trained with a distance setting its launch no longer has, replayed with the one the
+    # launch composes: the launch's own run folder, record and overrides
+    from tests.conftest import TINY, train_tiny_run
+
+    launch = TINY + PERTURBED
+    source = train_tiny_run(tmp_path / "source", launch + ["distance.input_scaling=none"])
+    (source / ".hydra").mkdir()
+    listed = launch + ["distance.input_scaling=none"]
+    (source / ".hydra" / "overrides.yaml").write_text(OmegaConf.to_yaml(listed))
+    out = tmp_path / "landed"
+    main([str(source), "--out", str(out), "--as-launched", "distance.input_scaling=global"])
+    (landed,) = [p for p in out.iterdir() if p.is_dir()]
+    kept = OmegaConf.to_container(OmegaConf.load(landed / ".hydra" / "overrides.yaml"))
+    assert "distance.input_scaling=none" not in kept and set(kept) <= set(launch)
+    assert landed.name == run_name(",".join(sorted(kept)))
+    assert (landed / "metrics.jsonl").read_text() == (perturbed_run / "metrics.jsonl").read_text()
+    assert "replayed_from" not in json.loads((landed / "summary.json").read_text())
+    # a replay that no launch of the source gives is refused, and nothing is written
+    with pytest.raises(SystemExit) as stop:
+        main([str(source), "--out", str(tmp_path / "no"), "--as-launched", "distance.y=2.0"])
+    assert stop.value.code == 2 and not (tmp_path / "no").exists()
+    assert "composes other settings" in capsys.readouterr().err
 
 
 def test_until_perturbation_is_the_unperturbed_run(perturbed_run):
