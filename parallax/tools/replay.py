@@ -504,6 +504,18 @@ def launched_as(source: Path, combo: Sequence[str], cfg: DictConfig) -> list[str
     return kept
 
 
+def final_eval_path(relative: str) -> str:
+    """Where a before-perturbation eval goes in a replay cut at the perturbation, whose final
+    model it scored: eval_before/eval.json → eval.json, eval_before_X/… → eval_X/… (as the
+    reproduction names the final model's evals); any other path stays."""
+    first, sep, rest = relative.partition("/")
+    if first == "eval_before" and sep:
+        return rest
+    if first.startswith("eval_before_") and sep:
+        return f"eval_{first.removeprefix('eval_before_')}/{rest}"
+    return relative
+
+
 def write_replay(result: dict, out_dir: Path, launched: Sequence[str] | None = None) -> None:
     """The replay as a run directory: config, summary, the rescored evals and, for a whole
     replay, the source's checkpoints with the replayed learner (so parallax-eval runs on it).
@@ -533,15 +545,10 @@ def write_replay(result: dict, out_dir: Path, launched: Sequence[str] | None = N
         write_atomic(out_dir / METRICS_NAME, metrics)
     summary = finite_or_none(result["summary"])  # strict JSON, as the trainer's
     write_atomic(out_dir / SUMMARY_NAME, json.dumps(summary, indent=2, allow_nan=False) + "\n")
+    cut = result["summary"].get("before_perturbation") is None
     for relative, evaluation in result.get("evals", {}).items():
-        if (
-            result["summary"].get("before_perturbation") is None
-            and relative != "eval.json"
-            and not evaluation.get("perturbed")
-        ):
-            relative = (
-                "eval.json"  # cut at the perturbation: the before-eval is this run's final one
-            )
+        if cut and not evaluation.get("perturbed"):
+            relative = final_eval_path(relative)
         (out_dir / relative).parent.mkdir(parents=True, exist_ok=True)
         write_atomic(out_dir / relative, json.dumps(evaluation, indent=2) + "\n")
 

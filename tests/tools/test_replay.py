@@ -249,6 +249,35 @@ def test_replayed_learners_are_scored_on_the_evals_eye_movements(perturbed_run, 
     assert totals["eval.json"] == pytest.approx(after["distance"]["by_range"]["total"], nan_ok=True)
 
 
+def test_a_cut_replay_keeps_each_before_eval_apart(perturbed_run, tmp_path):
+    # each eval of the model before the perturbation (photographs of another kind, more per
+    # distance) becomes the same eval of the cut replay's final model, none overwriting another
+    import shutil
+
+    from parallax.tools.evaluate import evaluate
+    from parallax.tools.replay import final_eval_path
+
+    assert final_eval_path("eval_before/eval.json") == "eval.json"
+    assert final_eval_path("eval_before_textures5/eval.json") == "eval_textures5/eval.json"
+    assert final_eval_path("custom/eval.json") == "custom/eval.json"
+    source = tmp_path / "source"
+    shutil.copytree(perturbed_run, source, ignore=shutil.ignore_patterns("eval*"))
+    for folder, distances in (("eval_before", [4.0, 6.0]), ("eval_before_other", [5.0])):
+        evaluate(
+            source,
+            distances=distances,
+            out=source / folder,
+            checkpoint_name="checkpoint_before_perturbation.pt",
+        )
+    main([str(source), "--out", str(tmp_path / "out"), "--until-perturbation"])
+    run = tmp_path / "out" / "source" / "default"
+    written = {str(p.relative_to(run)): json.loads(p.read_text()) for p in run.rglob("eval.json")}
+    assert {k: len(e["distance"]["per_distance"]) for k, e in written.items()} == {
+        "eval.json": 2,
+        "eval_other/eval.json": 1,
+    }
+
+
 def test_an_eval_is_rescored_with_the_other_readout(perturbed_run, tmp_path):
     """The eval keeps s read out both ways, so a replay that changes the readout scores that
     readout's pans; as trained, it scores the eval's own."""
