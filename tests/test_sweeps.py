@@ -425,6 +425,22 @@ def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_pat
     assert lines[-1] == "python -m parallax.tools.report.ablations docs/results "
 
 
+def test_the_fovea_study_trains_both_set_ups_and_pairs_them_with_the_familys_runs(tmp_path):
+    lines = _dry_run("fovea_study.sh", tmp_path, "train.presentations=7")
+    (trained,) = [l for l in lines if l.startswith("parallax-train -m ")]
+    assert "experiment=paper_single_5\\,paper_multi_5_10 env.fovea_px=150 " in trained
+    assert f"hydra.sweep.dir={tmp_path}/fovea " in trained
+    assert "seed=0\\,1\\,2" in trained and trained.rstrip().endswith("train.presentations=7")
+    paired = [shlex.split(l) for l in lines if "parallax.tools.report.paired_ablation" in l]
+    assert [p[p.index("--factor") + 1 : p.index("--factor") + 4] for p in paired] == [
+        ["env.fovea_px", "--baseline", "null"]
+    ] * 2
+    assert [p[3:5] for p in paired] == [
+        [f"{tmp_path}/fovea/<runs of {name}>", f"{tmp_path}/paper/<runs of {name}>"]
+        for name in ("paper_single_5", "paper_multi_5_10")
+    ]
+
+
 def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
     lines = _dry_run("sensitivity.sh", tmp_path, "train.presentations=7")
     sweeps = [l for l in lines if l.startswith("parallax-train -m ")]
