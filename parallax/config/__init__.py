@@ -19,6 +19,7 @@ from parallax.config.plumbing import (
     RESULT_NEUTRAL_KEYS,
     RESUMABLE_CHANGES,
     RUN_CONFIG_NAME,
+    RUN_TIME_KEYS,
     changed_settings,
     compose,
     flatten,
@@ -27,6 +28,7 @@ from parallax.config.plumbing import (
     load_run_config,
     perturbation_start,
     register_resolvers,
+    result_settings,
     run_name,
     run_settings,
     schema_keys,
@@ -47,7 +49,7 @@ from parallax.config.schema import (
     default,
     register,
 )
-from parallax.config.validate import RUN_TIME_KEYS, validate, validate_stimuli
+from parallax.config.validate import validate, validate_stimuli
 
 register()
 
@@ -82,6 +84,7 @@ __all__ = [
     "perturbation_start",
     "register",
     "register_resolvers",
+    "result_settings",
     "run_name",
     "run_settings",
     "schema_keys",

@@ -214,6 +214,18 @@ def load_run_config(run_dir: str | Path) -> DictConfig:
     return OmegaConf.merge(OmegaConf.structured(Config), saved)
 
 
+#: Settings the trainer fills at run time; ``???`` in a composed config.
+RUN_TIME_KEYS = frozenset(
+    {
+        "coder.seed",
+        "coder.image_size",
+        "policy.state_dim",
+        "policy.num_scales",
+        "policy.seed",
+        "distance.lateral_positions",
+        "distance.seed",
+    }
+)
 #: Settings that never change a run's results (the same list as the run-directory name ignores
 #: in conf/config.yaml).
 RESULT_NEUTRAL_KEYS = frozenset(
@@ -264,6 +276,14 @@ def flatten(config: dict, prefix: str = "") -> dict[str, Any]:
 def run_settings(config: dict) -> dict[str, Any]:
     """A run's settings as ``flatten`` gives them (its saved config holds every setting)."""
     return flatten(config)
+
+
+def result_settings(flat: dict[str, Any], *, seed: bool = False) -> dict[str, Any]:
+    """Flattened settings less those that change no result and those the trainer fills from the
+    rest at run time, and less the seed unless ``seed``: what two runs of one launch share (with
+    ``seed``, what makes two runs the same run)."""
+    dropped = RESULT_NEUTRAL_KEYS | RUN_TIME_KEYS | (set() if seed else {"seed"})
+    return {key: value for key, value in flat.items() if key not in dropped}
 
 
 def changed_settings(

@@ -20,24 +20,12 @@ from omegaconf import DictConfig, OmegaConf
 from parallax import readouts
 from parallax.checks import Checks, ConfigError
 from parallax.coding import settings as coder
-from parallax.config.plumbing import closest_key, schema_keys
+from parallax.config.plumbing import RUN_TIME_KEYS, closest_key, schema_keys
 from parallax.distance import settings as distance
 from parallax.envs import settings as world
 from parallax.envs import stimuli
 from parallax.policy import settings as policy
 
-#: Settings the trainer fills at run time; ``???`` in a composed config.
-RUN_TIME_KEYS = frozenset(
-    {
-        "coder.seed",
-        "coder.image_size",
-        "policy.state_dim",
-        "policy.num_scales",
-        "policy.seed",
-        "distance.lateral_positions",
-        "distance.seed",
-    }
-)
 #: train.resume_from: the latest checkpoint, or the one written before it.
 RESUME_FROM = ("latest", "previous")
 

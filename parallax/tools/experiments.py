@@ -29,8 +29,7 @@ from hydra.errors import HydraException
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from parallax.config import compose
-from parallax.config.plumbing import RESULT_NEUTRAL_KEYS, flatten
+from parallax.config import compose, flatten, result_settings
 
 
 def replayable(key: str) -> bool:
@@ -58,12 +57,6 @@ def settings(name: str, overrides: Sequence[str] = ()) -> dict:
     settings left out."""
     composed = compose([f"experiment={name}", *overrides])
     return result_settings(flatten(OmegaConf.to_container(composed, resolve=True)))
-
-
-def result_settings(flat: dict) -> dict:
-    """A flattened config less its seed and the settings that never change results: what two
-    runs of one experiment file share."""
-    return {k: v for k, v in flat.items() if k != "seed" and k not in RESULT_NEUTRAL_KEYS}
 
 
 def override_text(value) -> str:

@@ -53,12 +53,11 @@ from parallax import checkpoint
 from parallax.checkpoint import BEFORE_PERTURBATION_NAME, CHECKPOINT_NAME
 from parallax.config import (
     CONFIG_MODULE,
-    RESULT_NEUTRAL_KEYS,
     RUN_CONFIG_NAME,
-    RUN_TIME_KEYS,
     compose,
     flatten,
     load_run_config,
+    result_settings,
     run_name,
     run_settings,
 )
@@ -75,6 +74,7 @@ from parallax.tools.report.runs import (
     ReportError,
     eval_files,
     find_run_dirs,
+    launch_overrides,
     read_metrics,
     read_record,
 )
@@ -465,10 +465,9 @@ def check_checkpoints(sources: Iterable[Path]) -> None:
                     ) from None
 
 
-def _result_settings(cfg: Any) -> dict:
-    """The settings a run's results depend on (its seed included)."""
-    flat = run_settings(OmegaConf.to_container(cfg, resolve=True))
-    return {k: v for k, v in flat.items() if k not in RUN_TIME_KEYS | RESULT_NEUTRAL_KEYS}
+def _launch_settings(cfg: DictConfig) -> dict:
+    """What makes two runs the same run: their results' settings, seed included."""
+    return result_settings(run_settings(OmegaConf.to_container(cfg, resolve=True)), seed=True)
 
 
 def launched_as(source: Path, combo: Sequence[str], cfg: DictConfig) -> list[str]:
@@ -476,16 +475,16 @@ def launched_as(source: Path, combo: Sequence[str], cfg: DictConfig) -> list[str
     (whose config is ``cfg``): the source's own, less the replayed settings and less those the
     rest already give (its experiment and seed kept). ReplayError unless they compose ``cfg``."""
     path = source / HYDRA_OVERRIDES
-    if not path.is_file():
-        raise ReplayError(f"{source}: no {HYDRA_OVERRIDES}, so no launch to replay it as")
-    listed = [str(o) for o in (OmegaConf.to_container(OmegaConf.load(path)) or [])]
+    listed = launch_overrides(source)
+    if listed is None:
+        raise ReplayError(f"{source}: no readable {HYDRA_OVERRIDES}, so no launch to replay it as")
     replayed = {item.partition("=")[0] for item in combo}
     kept = [o for o in listed if o.partition("=")[0].lstrip("+~") not in replayed]
-    wanted = _result_settings(cfg)
+    wanted = _launch_settings(cfg)
 
     def composes(overrides: list[str]) -> dict:
         try:
-            return _result_settings(compose(overrides))
+            return _launch_settings(compose(overrides))
         except Exception as exc:  # Hydra's errors are long: the first line names the override
             raise ReplayError(f"{path}: {str(exc).splitlines()[0]}") from None
 
@@ -595,8 +594,9 @@ def main(argv: list[str] | None = None) -> None:
             if args.until_perturbation:
                 raise ReplayError("--as-launched replays whole runs: drop --until-perturbation")
             for s in sources:
+                saved = load_run_config(s)
                 for c in combos:
-                    cfg = load_run_config(s)
+                    cfg = saved.copy()
                     cfg.merge_with_dotlist(list(c))
                     launches[s, tuple(c)] = launched_as(s, c, cfg)
         targets = [_target(out, s, c, launches) for s in sources for c in combos]

@@ -207,7 +207,7 @@ def test_hydra_checks_types_and_keys_against_the_schema(override, message):
 
 def test_run_time_values_stay_missing():
     cfg = compose([])
-    from parallax.config.validate import RUN_TIME_KEYS
+    from parallax.config import RUN_TIME_KEYS
 
     # the values only the trainer knows, and nothing else, are left open
     assert OmegaConf.missing_keys(cfg) == RUN_TIME_KEYS

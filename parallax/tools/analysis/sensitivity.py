@@ -32,7 +32,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from parallax.config import RESULT_NEUTRAL_KEYS, RUN_TIME_KEYS, compose, run_settings
+from parallax.config import compose, result_settings, run_settings
 from parallax.tools.report.groups import Stat
 from parallax.tools.report.runs import ReportError, Run, find_run_dirs, load_run, read_metrics
 from parallax.writable import file_problem
@@ -58,9 +58,6 @@ ROWS = {
     "no input scaling (replay)": ["distance.input_scaling=none"],
     "the family's network (replay)": ["distance.input_scaling=none", "distance.warm_start=false"],
 }
-#: Settings a run's row does not depend on: its seed, those filled at run time, and those that
-#: change no result.
-IGNORED = {"seed", *RUN_TIME_KEYS, *RESULT_NEUTRAL_KEYS}
 #: A row's cells, in the table's order.
 CELLS = (
     "eye_before",
@@ -72,8 +69,7 @@ CELLS = (
 
 
 def _settings(config: dict) -> dict:
-    flat = run_settings(config)
-    return {k: v for k, v in flat.items() if k not in IGNORED}
+    return result_settings(run_settings(config))
 
 
 @functools.lru_cache(maxsize=4)

@@ -18,12 +18,9 @@ from typing import Any
 import numpy as np
 from omegaconf import OmegaConf
 
-from parallax.config import RESULT_NEUTRAL_KEYS, run_settings
+from parallax.config import result_settings, run_settings
 from parallax.metrics import position_label
 from parallax.tools.report.runs import Run
-
-#: Settings that never change a run's results, plus the seed, which is what a group averages over.
-IGNORED_KEYS = RESULT_NEUTRAL_KEYS | {"seed"}
 
 #: Settings that name an ablation when they vary; listed first, and never folded into another.
 PREFERRED_FACTORS = (
@@ -108,7 +105,7 @@ def json_ready(obj: Any) -> Any:
 
 
 def _group_key(run: Run) -> tuple:
-    return tuple(sorted((k, v) for k, v in run.flat.items() if k not in IGNORED_KEYS))
+    return tuple(sorted(result_settings(run.flat).items()))
 
 
 @dataclass(eq=False)  # identity: a group is one set of runs, however alike two may look

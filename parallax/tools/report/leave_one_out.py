@@ -27,7 +27,8 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from parallax.tools.experiments import ExperimentError, result_settings, settings
+from parallax.config import result_settings
+from parallax.tools.experiments import ExperimentError, settings
 from parallax.tools.report.groups import Stat, json_ready
 from parallax.tools.report.runs import (
     ReportError,

@@ -258,14 +258,20 @@ def eval_files(path: Path) -> list[Path]:
     return files
 
 
+def launch_overrides(path: Path) -> list[str] | None:
+    """The Hydra overrides a job directory was launched with (its .hydra/overrides.yaml); None
+    where it has none that can be read."""
+    if not (path / HYDRA_OVERRIDES).is_file():
+        return None
+    try:
+        return [str(o) for o in (_load_yaml(path / HYDRA_OVERRIDES) or [])]
+    except (YAMLError, OmegaConfBaseException):
+        return None
+
+
 def load_run(path: Path) -> Run:
     """Read one job directory; problems become `Run.problem`, not exceptions."""
-    overrides: list[str] = []
-    if (path / HYDRA_OVERRIDES).is_file():
-        try:
-            overrides = [str(o) for o in (_load_yaml(path / HYDRA_OVERRIDES) or [])]
-        except (YAMLError, OmegaConfBaseException):
-            overrides = []
+    overrides = launch_overrides(path) or []
     started = (path / RUN_CONFIG_NAME).is_file()
     config_path = path / RUN_CONFIG_NAME if started else path / HYDRA_CONFIG
     try:
