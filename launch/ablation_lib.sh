@@ -21,6 +21,9 @@
 #                                $SWEEP_ROOT/ablation_distance_source.
 #   px_replay OUT ARGS...        parallax-replay the distance sources into OUT with distance.* ARGS
 #                                (the part before any perturbation: Table 4's models).
+#   px_source_setting KEY        KEY's value in the first distance source's config.yaml: the
+#                                setting the source runs were trained with (a placeholder naming
+#                                it where there is no such file yet, as in a dry run).
 #   px_runs_with SWEEP_DIR OVERRIDE   the run folders of SWEEP_DIR launched with OVERRIDE, one per
 #                                line, read from their .hydra/overrides.yaml (a long run name is
 #                                shortened with a hash, so a glob on names can miss runs).
@@ -172,4 +175,15 @@ px_replay() {
   local out="$1"
   shift
   px_run parallax-replay "${distance_sources[@]}" --out "$out" --until-perturbation "$@"
+}
+
+px_source_setting() {
+  local config="${distance_sources[0]}/config.yaml"
+  if [[ -f "$config" ]]; then
+    python -c 'import sys; from omegaconf import OmegaConf
+print(OmegaConf.select(OmegaConf.load(sys.argv[1]), sys.argv[2], throw_on_missing=True))' \
+      "$config" "$1"
+  else
+    printf '<%s of the source runs>' "$1"
+  fi
 }

@@ -393,6 +393,7 @@ def test_distance_ablations_replay_their_source_runs(script, tmp_path):
     assert all("--until-perturbation" in l for l in replays)
     (tmp_path / "runs" / "a").mkdir(parents=True)
     (tmp_path / "runs" / "b").mkdir()
+    (tmp_path / "runs" / "a" / "config.yaml").write_text("distance:\n  queue_size: 100\n")
     lines = _dry_run(script, tmp_path, SOURCE=f"{tmp_path}/runs/*")
     assert not [l for l in lines if l.startswith("parallax-train")], lines
     assert all(
@@ -400,6 +401,9 @@ def test_distance_ablations_replay_their_source_runs(script, tmp_path):
         for l in lines
         if l.startswith("parallax-replay")
     )
+    if script == "ablation_queue.sh":  # each c against the c the source runs were trained with
+        (paired,) = [shlex.split(l) for l in lines if "paired_ablation" in l]
+        assert paired[paired.index("--baseline") + 1] == "100"
 
 
 def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_path):
@@ -416,11 +420,13 @@ def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_pat
     assert sum(f"{tmp_path}/recipe/" in l for l in replays) == 3
     assert all("distance.y=0.25\\,0.5\\,1\\,2\\,4" in l for l in replays if "y=" in l)
     assert len([l for l in lines if l.startswith("parallax-report ")]) == 5
-    # every setting against its baseline, paired: both scales, no weighting, the paper's c
+    # every setting against its baseline, paired: both scales, no weighting, the runs' own c
     paired = [l for l in lines if "parallax.tools.report.paired_ablation" in l]
     baselines = sorted(shlex.split(l)[shlex.split(l).index("--baseline") + 1] for l in paired)
     assert baselines == sorted(
-        ['["coarse", "fine"]'] * 2 + ["300"] * 2 + ["distance.weighting=false, distance.y=1.0"] * 2
+        ['["coarse", "fine"]'] * 2
+        + ["<distance.queue_size of the source runs>"] * 2
+        + ["distance.weighting=false, distance.y=1.0"] * 2
     )
     assert lines[-1] == "python -m parallax.tools.report.ablations docs/results "
 
