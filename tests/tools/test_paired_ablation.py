@@ -68,6 +68,9 @@ def test_a_known_improvement_is_told_apart_and_no_change_is_not(tmp_path):
     assert rows["2.0"]["eye_after"]["value"]["n"] == 0  # never perturbed: no "after"
     text = pa.markdown(result)
     assert "| 2.0 | 0, 1, 2, 3 |" in text and "told apart" in text
+    # y = 4 has y = 1's eye in every seed, as a replay has: said so, not given as an effect
+    (row_4,) = [line for line in text.splitlines() if line.startswith("| 4.0 |")]
+    assert row_4.split(" | ")[2].endswith("; the same in every sample")
 
 
 def test_two_runs_of_one_value_and_seed_or_one_value_only_are_refused(tmp_path, capsys):

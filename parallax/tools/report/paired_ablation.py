@@ -160,7 +160,9 @@ def markdown(result: dict) -> str:
             stat = Stat.from_dict(cell["value"])
             text = "—" if not stat.n else stat.text(3 if column.startswith("eye") else 2)
             d = cell.get("difference")
-            if d and d["seeds"] > 1:
+            if d and d["seeds"] > 1 and d["mean"] == d["low"] == d["high"] == 0:
+                text += "; the same in every sample"  # e.g. the eye of a replay: not an effect
+            elif d and d["seeds"] > 1:
                 told = (
                     "told apart"
                     if d["tells_apart"]
