@@ -282,8 +282,12 @@ for family in "${families[@]}"; do
   fi
   # the records as they are committed: the finished runs' metrics.jsonl and eval.json compressed,
   # keeping what parallax-replay and the reports read; the single positions' (which nothing
-  # replays) only what the reports read
-  px_run python -m parallax.tools.report.compact --keep replay "${sources[@]}" || status=$?
+  # replays) only what the reports read; the replays' only their distance learner's (their eye
+  # is their source's)
+  px_run python -m parallax.tools.report.compact --keep replay "$sweep" || status=$?
+  if [[ -d "$replays" || -n "${PARALLAX_DRY_RUN:-}" ]]; then
+    px_run python -m parallax.tools.report.compact --keep distance "$replays" || status=$?
+  fi
   singles=("$sweep"/*single_*)
   if [[ -e "${singles[0]}" ]]; then
     px_run python -m parallax.tools.report.compact --keep reports "${singles[@]}" || status=$?

@@ -298,6 +298,11 @@ def test_the_reproduction_trains_each_eye_once_and_replays_the_distance_only_fil
         assert f"experiment={name}\\," not in trained and f"\\,{name}\\," not in trained
         assert any(f"_replays/{name} " in l for l in replayed), name
     assert "without_reward_change" in trained and "recipe_multi_5_20_weighted" in trained
+    # the replays' records keep their learner's keys only, the trained runs' what replays read
+    compacted = [shlex.split(l) for l in lines if "parallax.tools.report.compact" in l]
+    keeps = {words[-1]: words[words.index("--keep") + 1] for words in compacted}
+    assert keeps and all(keeps[f] == "distance" for f in keeps if f.endswith("_replays"))
+    assert {"replay", "distance"} <= set(keeps.values())
     # five seeds for the 5–20 cm headline rows, three elsewhere
     headline = [l for l in lines if l.startswith("parallax-train -m ") and "0\\,1\\,2\\,3\\,4" in l]
     assert len(headline) == 3 and all("multi_5_20_weighted seed=" in l for l in headline)

@@ -118,7 +118,7 @@ def test_a_plain_record_beside_a_compressed_one_is_the_newer(tmp_path, capsys):
 def test_compact_names_a_path_that_holds_no_run(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main([str(tmp_path / "missing")])
-    assert exc.value.code == 1
+    assert exc.value.code == 2
     assert "missing does not exist" in capsys.readouterr().err
 
 
@@ -142,6 +142,33 @@ def test_thinning_keeps_what_the_reports_read_and_drops_the_vectors(tmp_path):
     assert read_metrics(runs[0]) == thinned
 
 
+def test_a_replays_record_keeps_its_learners_keys_and_a_trained_run_is_refused(tmp_path, capsys):
+    root = tmp_path / "runs"
+    runs = _runs(root, np.random.default_rng(1))[:2]
+    lines = [
+        {**line, "pans": [[0.1, 0.2]], "lm_loss": 1 / 3, "distance_error": 2 / 3}
+        for line in read_metrics(runs[0])
+    ]
+    for run in runs:
+        (run / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in lines))
+    record = runs[0] / "metrics.jsonl"
+    with pytest.raises(SystemExit) as exc:  # neither is a replay yet
+        main([str(root), "--keep", "distance"])
+    assert exc.value.code == 2
+    assert "not a replay" in capsys.readouterr().err
+    assert record.read_text() == "".join(json.dumps(r) + "\n" for r in lines)  # untouched
+    for run in runs:
+        summary = json.loads((run / "summary.json").read_text())
+        (run / "summary.json").write_text(json.dumps({**summary, "replayed_from": "source"}))
+    compact([root], keep="distance")
+    kept = read_metrics(runs[0])
+    assert {"mae", "mae_per_position", "pans"}.isdisjoint(kept[0])
+    assert kept[0]["lm_loss"] == 0.3333333 and kept[0]["distance_error"] == 0.6666667
+    assert [line["presentation"] for line in kept] == [line["presentation"] for line in lines]
+    report, _ = build_report([root], tmp_path / "report", tables="paper")  # no eye curve drawn
+    assert "mae_g01.png" not in json.dumps(report)
+
+
 def test_rounding_reaches_the_numbers_inside_lists_and_dicts():
     from parallax.tools.report.compact import rounded
 
@@ -156,7 +183,9 @@ def test_rounding_reaches_the_numbers_inside_lists_and_dicts():
 
 
 def test_keep_names_what_it_may_keep(tmp_path, capsys):
-    with pytest.raises(ValueError, match="keep must be one of all, replay, reports, got 'some'"):
+    with pytest.raises(
+        ValueError, match="keep must be one of all, replay, reports, distance, got 'some'"
+    ):
         compact([tmp_path], keep="some")
     with pytest.raises(SystemExit) as exc:
         main([str(tmp_path), "--keep", "some"])

@@ -7,6 +7,7 @@ replay and analysis tools takes in place of the plain file
     python -m parallax.tools.report.compact … --format gz          # gzip instead of xz
     python -m parallax.tools.report.compact … --keep replay        # what replays and reports read
     python -m parallax.tools.report.compact … --keep reports       # only what the reports read
+    python -m parallax.tools.report.compact … --keep distance      # a replay's own: its learner's
 
 Only runs that are over are compacted: finished (a `summary.json` beside the `config.yaml`) or
 stopped by the trainer as diverged (its `diverged.json`); the trainer resumes an unfinished run
@@ -24,6 +25,10 @@ keys in REPLAYED exactly, so that parallax-replay of the kept record is bit-iden
 the whole one; ``reports`` only the READ_BY_REPORTS keys, rounded: what the reports, the figures
 and the analysis tools read of a run that nothing replays (a single position, a speed of the
 continuous sweep). Rounding halves what is left (the reports print three or four digits).
+``distance``, for the records of parallax-replay alone, only what the replay changed: the distance
+learner's keys (FIT_KEYS, lm_*, which presentations it learnt from), rounded. A replay's eye is its
+source's (``replayed_from`` in its summary), whose record keeps it, so the reports draw no eye
+curve of a replay; a record that is not a replay's is refused.
 """
 
 from __future__ import annotations
@@ -87,8 +92,10 @@ REPLAYED = (
 #: prefix) and the online distance error at the end of each block (FIT_KEYS).
 FIT_PREFIX = "lm_"
 FIT_KEYS = ("distance_error",)
+#: What ``--keep distance`` keeps of a replay's line: where it is in the run, and its learner's.
+REPLAY_OWN = ("presentation", "steps", "stage", "perturbed", "learnt_distance")
 #: What ``--keep`` may name, from the most kept to the least.
-KEEPS = ("all", "replay", "reports")
+KEEPS = ("all", "replay", "reports", "distance")
 
 #: Digits a thinned record keeps of each number: the reports print three or four, so a relative
 #: change of at most 5e-7 moves none of them (the 17 a float64 prints double the file).
@@ -107,9 +114,15 @@ def rounded(value: Any) -> Any:
 
 
 def kept_line(line: dict[str, Any], keep: str) -> dict[str, Any]:
-    """What ``--keep replay`` or ``--keep reports`` keeps of one metrics.jsonl line."""
+    """What ``--keep replay``, ``reports`` or ``distance`` keeps of one metrics.jsonl line."""
     if keep == "reports":
         return {k: rounded(v) for k, v in line.items() if k in READ_BY_REPORTS}
+    if keep == "distance":
+        return {
+            k: rounded(v)
+            for k, v in line.items()
+            if k in REPLAY_OWN or k in FIT_KEYS or k.startswith(FIT_PREFIX)
+        }
     return {
         k: v if k in REPLAYED else rounded(v)
         for k, v in line.items()
@@ -195,6 +208,14 @@ def compact(
     if keep not in KEEPS:
         raise ValueError(f"keep must be one of {', '.join(KEEPS)}, got {keep!r}")
     runs = runs_over(paths)
+    if keep == "distance":
+        for run in runs:
+            summary = json.loads((run / SUMMARY_NAME).read_text(encoding="utf-8"))
+            if not summary.get("replayed_from"):
+                raise ValueError(
+                    f"{run}: not a replay (its summary names no replayed_from), so its record "
+                    "holds its own eye: --keep distance would drop it"
+                )
     # a run with a summary may be training again (lengthened): runs another process is writing
     # are refused before any is compacted, and each is locked while it is
     held = probe_all(runs)
@@ -235,7 +256,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         "--keep",
         choices=KEEPS,
         default="all",
-        help="of each metrics line: every key, what replays and reports read, or what reports read",
+        help="of each metrics line: every key, what replays and reports read, what reports read, "
+        "or (a replay's record) its distance learner's keys",
     )
     args = parser.parse_args(argv)
     try:
@@ -243,7 +265,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     except RunLocked as exc:
         print(f"[compact] error: {exc}; wait for it to end", file=sys.stderr)
         raise SystemExit(2) from None
-    except (ReportError, OSError) as exc:
+    except (ReportError, ValueError) as exc:  # a path or a run it may not thin: nothing changed
+        print(f"[compact] error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+    except OSError as exc:
         print(f"[compact] error: {exc}", file=sys.stderr)
         raise SystemExit(1) from None
     print(

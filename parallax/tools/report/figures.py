@@ -28,8 +28,9 @@ class Curves:
 
 
 def group_curves(group: Group) -> Curves | None:
-    """Mean and sd over seeds of the sliding-window MAE, aligned by presentation."""
-    records = [rec for rec in (read_metrics(r.path) for r in group.runs) if rec]
+    """Mean and sd over seeds of the sliding-window MAE, aligned by presentation (of the
+    records that keep the eye's: a replay's compacted record keeps only its learner's)."""
+    records = [rec for rec in (read_metrics(r.path) for r in group.runs) if rec and "mae" in rec[0]]
     if not records:
         return None
     length = min(len(r) for r in records)
