@@ -396,6 +396,11 @@ def test_distance_ablations_replay_their_source_runs(script, tmp_path):
         trained
     )
     assert all("--until-perturbation" in l for l in replays)
+    # the replays are records, committed with their learner's keys only
+    assert all(f"--out {tmp_path}/ablation_" in l for l in replays)
+    compacted = [l for l in trained if "parallax.tools.report.compact" in l]
+    assert compacted == [f"python -m parallax.tools.report.compact --keep distance {tmp_path}/"
+                         f"ablation_{script.split('_')[1].split('.')[0]} "]  # fmt: skip
     (tmp_path / "runs" / "a").mkdir(parents=True)
     (tmp_path / "runs" / "b").mkdir()
     (tmp_path / "runs" / "a" / "config.yaml").write_text("distance:\n  queue_size: 100\n")
