@@ -10,7 +10,8 @@
 # built anew at every fit, where the study keeps MATLAB's, and each of its two choices alone) by
 # parallax-replay of the lineage's runs;
 # the records compacted as committed (the lineage's keep what the replays read, the switches' what
-# the table reads); then the table, docs/results/sensitivity.md and .json. Resumable (fixed
+# the table reads, the replays' their distance learner's); then the table,
+# docs/results/sensitivity.md and .json. Resumable (fixed
 # folders, like launch/reproduce.sh).
 # Arguments with '=' are Hydra overrides for every run; the table is told of them.
 #     bash launch/sensitivity.sh
@@ -65,6 +66,7 @@ if (( ${#lineage[@]} )); then
   px_run parallax-replay "${lineage[@]}" --out "$replays" distance.warm_start=false || status=$?
   px_run parallax-replay "${lineage[@]}" --out "$replays" \
     distance.input_scaling=none distance.warm_start=true,false || status=$?
+  px_run python -m parallax.tools.report.compact --keep distance "$replays" || status=$?
 fi
 table_overrides=()
 for arg in "$@"; do table_overrides+=("--override=$arg"); done

@@ -54,6 +54,22 @@ def test_runs_go_to_the_row_of_their_settings(study, tmp_path, capsys):
     assert line.startswith(f"| lineage | 1 | — | {want:.3f} |")
 
 
+def test_a_replays_critic_peak_is_read_from_its_source(study, tmp_path):
+    """A replay's compacted record keeps only its distance learner's keys: its row's critic
+    peak is its source's, read from the source's record."""
+    from parallax.tools.replay import main as replay
+    from parallax.tools.report.compact import compact
+
+    replays = tmp_path / "replays"
+    replay([str(study / "lineage"), "--out", str(replays), "distance.warm_start=false"])
+    compact([replays], keep="distance")
+    result = sensitivity.sensitivity([study, replays], SHRUNK)
+    rows = result["table"]["single_5"]
+    replayed = next(row for row in rows if "warm_start" in row or "new network" in row)
+    assert rows[replayed]["critic_peak"] == rows["lineage"]["critic_peak"]
+    assert rows[replayed]["critic_peak"]["mean"] > 0
+
+
 def _stopped_copy(study, root, name, diverged):
     """A copy of the lineage's run that stopped before its summary: killed, or (``diverged``)
     stopped after the perturbation as the trainer stops one whose numbers are not finite, its

@@ -85,9 +85,11 @@ def row_settings(overrides: tuple[str, ...]) -> dict[tuple[str, str], dict]:
     return table
 
 
-def critic_peak(path: Path) -> float | None:
-    """The largest finite mean |v·φ| a run logged (a replay: its source's; None if none)."""
-    scales = [r.get("policy_critic_scale") for r in read_metrics(path)]
+def critic_peak(run: Run) -> float | None:
+    """The largest finite mean |v·φ| a run logged (a replay: its source's, read from the source's
+    record, since a replay's keeps only its distance learner's; None if none)."""
+    source = (run.summary or {}).get("replayed_from")
+    scales = [r.get("policy_critic_scale") for r in read_metrics(Path(source or run.path))]
     scales = [s for s in scales if isinstance(s, (int, float)) and math.isfinite(s)]
     return max(scales) if scales else None
 
@@ -100,7 +102,7 @@ def run_figures(run: Run) -> dict:
         means = [cell["mean"] for cell in trials.values() if cell.get("mean") is not None]
         figures[f"eye_{phase}"] = sum(means) / len(means) if means else None
         figures[f"distance_{phase}"] = (run.online_distance(phase) or {}).get("total")
-    figures["critic_peak"] = critic_peak(run.path)
+    figures["critic_peak"] = critic_peak(run)
     return figures
 
 
