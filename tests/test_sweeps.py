@@ -499,11 +499,18 @@ def test_the_sensitivity_study_switches_one_setting_per_sweep(tmp_path):
     ]
     replay = replays[0]
     # the records as committed: the switches' thinned to what the table reads, the lineage's
-    # keeping the eye-movement vectors that its replays (just after) read
+    # keeping the eye-movement vectors that its replays (just after) read, the replays' their
+    # distance learner's (after the last replay)
     compacted = [l for l in lines if "parallax.tools.report.compact" in l]
-    assert [l.split()[3:5] for l in compacted] == [["--keep", "reports"], ["--keep", "replay"]]
+    assert [l.split()[3:5] for l in compacted] == [
+        ["--keep", "reports"],
+        ["--keep", "replay"],
+        ["--keep", "distance"],
+    ]
     assert "switch" in compacted[0] and "lineage" in compacted[1]
     assert lines.index(compacted[1]) < lines.index(replay)
+    assert compacted[2].rstrip().endswith("sensitivity_replays")
+    assert lines.index(compacted[2]) > max(lines.index(r) for r in replays)
     (table,) = [l for l in lines if "parallax.tools.analysis.sensitivity" in l]
     assert "--override=train.presentations=7" in table
 
