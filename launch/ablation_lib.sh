@@ -7,8 +7,8 @@
 #   px_sweep SWEEP_DIR ARGS...   parallax-train -m ARGS on the chosen launcher into SWEEP_DIR;
 #                                the caller's "$@" goes last, so it overrides anything before it.
 #   px_eval SWEEP_DIR [CHECKPOINT [SUBDIR [ARGS...]]]   parallax-eval every finished run whose
-#                                eval.json (in RUN/SUBDIR) is missing or older than its checkpoint
-#                                (N_JOBS at a time; log in RUN/SUBDIR/eval.log).
+#                                eval.json (in RUN/SUBDIR; plain or compacted) is missing or older
+#                                than its checkpoint (N_JOBS at a time; log in RUN/SUBDIR/eval.log).
 #   px_report OUT NAME TITLE TABLES SWEEP_DIR...   parallax-report into OUT/NAME.
 #   px_paired NAME FACTOR BASELINE RUNS...   every value of FACTOR against BASELINE as
 #                                paired differences with 95 % intervals and verdicts
@@ -21,6 +21,11 @@
 #                                $SWEEP_ROOT/ablation_distance_source.
 #   px_replay OUT ARGS...        parallax-replay the distance sources into OUT with distance.* ARGS
 #                                (the part before any perturbation: Table 4's models).
+#   px_score_sources             the distance ablations' scoring: each distance source's model
+#                                before its perturbation (in the run, else in the committed
+#                                REPORT_ROOT/checkpoints/<experiment>_seed<n>) greedy on five held-out
+#                                photographs per grid distance, into SOURCE/eval_before_textures5
+#                                (skipped where that eval is newer than the model).
 #   px_source_setting KEY        KEY's value in the first distance source's config.yaml: the
 #                                setting the source runs were trained with (a placeholder naming
 #                                it where there is no such file yet, as in a dry run).
@@ -100,8 +105,7 @@ px_eval() {
   local todo=() summary run out failed=0
   while IFS= read -r -d '' summary; do
     run="$(dirname "$summary")"
-    out="$run${subdir:+/$subdir}"
-    if [[ -f "$run/$checkpoint" && ( ! -f "$out/eval.json" || "$run/$checkpoint" -nt "$out/eval.json" ) ]]; then
+    if px_needs_eval "$run/$checkpoint" "$run${subdir:+/$subdir}"; then
       todo+=("$run")
     fi
   done < <(find "$sweep_dir" -name summary.json -not -path '*/.*' -print0 2>/dev/null)
@@ -124,6 +128,17 @@ px_eval() {
     wait -n || failed=1
   done
   return "$failed"
+}
+
+px_needs_eval() {
+  # px_needs_eval CHECKPOINT OUT: whether CHECKPOINT exists and OUT holds no eval.json of it, plain
+  # or compacted (a compacted copy keeps the plain file's modification time), newer than it
+  local record
+  [[ -f "$1" ]] || return 1
+  for record in "$2"/eval.json{,.xz,.gz}; do
+    [[ -f "$record" ]] && break
+  done
+  [[ ! -f "$record" || "$1" -nt "$record" ]]
 }
 
 px_report() {
@@ -186,4 +201,27 @@ print(OmegaConf.select(OmegaConf.load(sys.argv[1]), sys.argv[2], throw_on_missin
   else
     printf '<%s of the source runs>' "$1"
   fi
+}
+
+px_score_sources() {
+  local source summary run model name status=0
+  local args=(--checkpoint checkpoint_before_perturbation.pt --robots 16 --greedy-only --between none
+    --textures 5)
+  if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
+    echo "parallax-eval MODEL ${args[*]} --out RUN/eval_before_textures5  # each finished run below ${distance_sources[*]} (MODEL: the run, or its committed checkpoints) without an up-to-date eval"
+    return 0
+  fi
+  for source in "${distance_sources[@]}"; do
+    while IFS= read -r -d '' summary; do
+      run="$(dirname "$summary")" name="$(basename "$run")" model="$run"
+      if [[ ! -f "$model/checkpoint_before_perturbation.pt" \
+            && "$name" =~ ^experiment=([^,]+),seed=([0-9]+)$ ]]; then
+        model="$report_root/checkpoints/${BASH_REMATCH[1]}_seed${BASH_REMATCH[2]}"
+      fi
+      if px_needs_eval "$model/checkpoint_before_perturbation.pt" "$run/eval_before_textures5"; then
+        parallax-eval "$model" "${args[@]}" --out "$run/eval_before_textures5" || status=$?
+      fi
+    done < <(find "$source" -name summary.json -not -path '*/.*' -print0 2>/dev/null)
+  done
+  return "$status"
 }

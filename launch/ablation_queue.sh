@@ -14,6 +14,7 @@ name="${NAME:-queue}"
 out="$(px_record_dir "ablation_$name")"
 status=0
 px_distance_source "$@" || status=$?
+px_score_sources || status=$?
 px_replay "$out" distance.queue_size=50,100,300,1000 || status=$?
 px_run python -m parallax.tools.report.compact --keep distance "$out" || status=$?
 px_report "$report_root/ablations" "$name.md" "Ablation: queue size c (paper eq. 9)" ablation \

@@ -15,6 +15,7 @@ name="${NAME:-y}"
 out="$(px_record_dir "ablation_$name")"
 status=0
 px_distance_source "$@" || status=$?
+px_score_sources || status=$?
 px_replay "$out" distance.weighting=true distance.y=0.25,0.5,1,2,4 || status=$?
 px_replay "$out" distance.weighting=false || status=$?
 px_run python -m parallax.tools.report.compact --keep distance "$out" || status=$?

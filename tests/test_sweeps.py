@@ -396,6 +396,11 @@ def test_distance_ablations_replay_their_source_runs(script, tmp_path):
         trained
     )
     assert all("--until-perturbation" in l for l in replays)
+    # scored on five held-out photographs per grid distance by the source's model before its
+    # perturbation
+    (scoring,) = [l for l in trained if l.startswith("parallax-eval ")]
+    assert "--checkpoint checkpoint_before_perturbation.pt" in scoring and "--textures 5" in scoring
+    assert trained.index(scoring) < trained.index(replays[0])
     # the replays are records, committed with their learner's keys only
     assert all(f"--out {tmp_path}/ablation_" in l for l in replays)
     compacted = [l for l in trained if "parallax.tools.report.compact" in l]
@@ -414,6 +419,52 @@ def test_distance_ablations_replay_their_source_runs(script, tmp_path):
     if script == "ablation_queue.sh":  # each c against the c the source runs were trained with
         (paired,) = [shlex.split(l) for l in lines if "paired_ablation" in l]
         assert paired[paired.index("--baseline") + 1] == "100"
+
+
+def test_a_model_is_evaluated_again_only_when_its_checkpoint_is_newer_than_its_eval(tmp_path):
+    """px_eval's choice: a compacted eval.json counts as the plain one."""
+    run = tmp_path / "run"
+    (run / "eval_before").mkdir(parents=True)
+
+    def needs(checkpoint: str, out: str) -> bool:
+        command = f"source {REPO}/launch/ablation_lib.sh; px_needs_eval {run}/{checkpoint} {out}"
+        env = {**os.environ, "PARALLAX_DRY_RUN": "1"}
+        return subprocess.run(["bash", "-c", command], env=env).returncode == 0
+
+    assert not needs("checkpoint.pt", run)  # no model
+    (run / "checkpoint.pt").write_bytes(b"")
+    assert needs("checkpoint.pt", run)  # no eval
+    (run / "eval.json.xz").write_bytes(b"")
+    os.utime(run / "checkpoint.pt", (1_000_000_000, 1_000_000_000))
+    assert not needs("checkpoint.pt", run)  # evaluated, compacted
+    os.utime(run / "checkpoint.pt", (2_000_000_000, 2_000_000_000))
+    assert needs("checkpoint.pt", run)  # trained further since
+    assert needs("checkpoint.pt", run / "eval_before")
+
+
+def test_the_distance_ablations_score_each_source_with_its_own_or_its_committed_model(tmp_path):
+    runs, committed = tmp_path / "runs", tmp_path / "report" / "checkpoints"
+    for name in ("experiment=a,seed=3", "experiment=b,seed=1", "experiment=c,seed=0"):
+        (runs / name).mkdir(parents=True)
+        (runs / name / "summary.json").write_text("{}")
+    (committed / "a_seed3").mkdir(parents=True)  # a's model only among the committed ones
+    (committed / "a_seed3" / "checkpoint_before_perturbation.pt").write_bytes(b"")
+    for name in ("experiment=b,seed=1", "experiment=c,seed=0"):  # models of their own
+        (runs / name / "checkpoint_before_perturbation.pt").write_bytes(b"")
+    scored = runs / "experiment=c,seed=0" / "eval_before_textures5"
+    scored.mkdir()
+    (scored / "eval.json.xz").write_bytes(b"")  # c is scored already (newer than its model)
+    os.utime(runs / "experiment=c,seed=0" / "checkpoint_before_perturbation.pt", (1, 1))
+    command = (
+        f'source {REPO}/launch/ablation_lib.sh; parallax-eval() {{ echo "EVAL $1 $*"; }}; '
+        f"distance_sources=({runs}); px_score_sources"
+    )
+    env = {**os.environ, "REPORT_ROOT": str(tmp_path / "report")}
+    env.pop("PARALLAX_DRY_RUN", None)
+    result = subprocess.run(["bash", "-c", command], env=env, capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    evals = sorted(l.split()[1] for l in result.stdout.splitlines() if l.startswith("EVAL "))
+    assert evals == [str(committed / "a_seed3"), str(runs / "experiment=b,seed=1")]
 
 
 def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_path):
