@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Reproduces the results report (docs/results/): every experiment of a family for every seed,
 # parallax-eval of each multiple-position model before and after the perturbation, the 5–20 cm
-# models of the recipe and the paper family (the two a user builds on) kept in
-# docs/results/checkpoints/<experiment>_seed<n> (committed), and the reports. A family is a
+# models of the recipe and the paper family (the two a user builds on) of the first headline seed
+# kept in docs/results/checkpoints/<experiment>_seed<n> (committed), and the reports. A family is a
 # prefix of the experiment files in conf/experiment/ (<family>_algorithm.yaml, the settings its
 # files include, is not an experiment of its own):
 #     bash launch/reproduce.sh              # recipe, paper, unsourced and without, then the report
@@ -150,13 +150,16 @@ kept_model() {  # NAME RUN: where the reproduction keeps the models (config and 
   printf '%s/checkpoints/%s_seed%s' "$report_root" "$1" "$(sed -n 's/^seed: //p' "$2/config.yaml")"
 }
 
-keep_models() {  # SWEEP NAME...: the finished runs' models, committed beside the records, so that
-  # anyone can run parallax-eval on them and a later reproduction can evaluate a committed record
-  local sweep="$1" name run keep
+keep_models() {  # SWEEP NAME...: the models of the first headline seed's finished runs, committed
+  # beside the records so that anyone can run parallax-eval or parallax-render on them (every
+  # run's evaluations are committed; the other seeds' models are not, to keep the repository light)
+  local sweep="$1" name run keep first="${HEADLINE_SEEDS:-0,1,2,3,4}"
   shift
+  first="${first%%,*}"
   for name in "$@"; do
     while IFS= read -r run; do
       [[ -f "$run/summary.json" && -f "$run/checkpoint.pt" ]] || continue
+      [[ "$(sed -n 's/^seed: //p' "$run/config.yaml")" == "$first" ]] || continue
       keep="$(kept_model "$name" "$run")"
       px_run mkdir -p "$keep"
       px_run cp "$run/config.yaml" "$run/checkpoint.pt" "$run/checkpoint_before_perturbation.pt" "$keep/"
