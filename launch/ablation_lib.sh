@@ -20,7 +20,9 @@
 #                                else the default experiment trained for SEEDS (plus ARGS) into
 #                                $SWEEP_ROOT/ablation_distance_source.
 #   px_replay OUT ARGS...        parallax-replay the distance sources into OUT with distance.* ARGS
-#                                (the part before any perturbation: Table 4's models).
+#                                (the part before any perturbation: Table 4's models), scoring
+#                                again their evaluations on five photographs per distance
+#                                (px_score_sources) and of the eye as trained (eval_before_trained).
 #   px_score_sources             the distance ablations' scoring: each distance source's model
 #                                before its perturbation (in the run, else in the committed
 #                                REPORT_ROOT/checkpoints/<experiment>_seed<n>) greedy on five held-out
@@ -189,7 +191,8 @@ px_runs_with() {
 px_replay() {
   local out="$1"
   shift
-  px_run parallax-replay "${distance_sources[@]}" --out "$out" --until-perturbation "$@"
+  px_run parallax-replay "${distance_sources[@]}" --out "$out" --until-perturbation \
+    --rescore eval_before_textures5 --rescore eval_before_trained "$@"
 }
 
 px_source_setting() {

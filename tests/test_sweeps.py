@@ -396,6 +396,9 @@ def test_distance_ablations_replay_their_source_runs(script, tmp_path):
         trained
     )
     assert all("--until-perturbation" in l for l in replays)
+    assert all(
+        "--rescore eval_before_textures5 --rescore eval_before_trained" in l for l in replays
+    )
     # scored on five held-out photographs per grid distance by the source's model before its
     # perturbation
     (scoring,) = [l for l in trained if l.startswith("parallax-eval ")]

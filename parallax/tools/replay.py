@@ -144,6 +144,7 @@ def replay(
     overrides: Sequence[str] = (),
     until_perturbation: bool = False,
     bar: Any = None,
+    rescore: Sequence[str] | None = None,
 ) -> dict:
     """The source run's summary with the distance learner re-run under `overrides`.
 
@@ -151,7 +152,8 @@ def replay(
     perturbation and present the result as a run of that length without one (config and summary
     alike), so that the ablation tables of parallax-report compare the unperturbed models (Table 4,
     not Table 5). A run never perturbed is replayed whole. ``bar``: a progress bar that moves on
-    by each presentation replayed.
+    by each presentation replayed. ``rescore``: the folders (relative to the run, "." for its own)
+    of the evaluations to score again with the replayed learner; None: every one.
     """
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
@@ -226,7 +228,7 @@ def replay(
         "final": None if body is None else functools.partial(body.truths, grown=body.grown),
     }
     evals = _rescore_evals(
-        run_dir, summary, before_learner, None if cut else learner, readout, truths
+        run_dir, summary, before_learner, None if cut else learner, readout, truths, rescore
     )
     if body is not None:
         body.close()
@@ -341,18 +343,22 @@ def _rescore_evals(
     final_learner,
     readout: str = "last",
     truths: dict | None = None,
+    folders: Sequence[str] | None = None,
 ) -> dict[str, dict]:
     """The source's parallax-eval results with the distances re-predicted by the replayed
     learners, on the very eye movements the eval recorded (eval.json "samples"); keyed by the
     eval file's path relative to the run. The frozen eye is the source's, so the eye-movement
     numbers are kept as they are. Evals that read s otherwise than ``readout`` are left out.
     ``truths`` ("before", "final"): for odometry targets, (source, distances) → the slip-free
-    readings of the body at that checkpoint; None: the distances."""
+    readings of the body at that checkpoint; None: the distances. ``folders``: only the evals in
+    these folders (relative to the run); None: every one."""
     from parallax.tools.evaluate import distance_results
 
     rescored = {}
     start = (summary.get("before_perturbation") or {}).get("presentations")
     for path in eval_files(run_dir):
+        if folders is not None and str(path.parent.relative_to(run_dir)) not in folders:
+            continue
         result = json.loads(read_record(path))
         samples = _eval_samples(result, readout)
         if not samples:
@@ -572,6 +578,13 @@ def main(argv: list[str] | None = None) -> None:
         help="write each replay as the run of the source's launch less the replayed settings "
         "(OUT/<its overrides>/, .hydra/overrides.yaml); refused unless that launch composes it",
     )
+    parser.add_argument(
+        "--rescore",
+        action="append",
+        metavar="EVAL_FOLDER",
+        help="score again only this evaluation of each source (its folder relative to the run, "
+        "'.' for the run's own; repeat for more); default: every one",
+    )
     # intermixed: the overrides may come after the options (as launch/ablation_lib.sh puts them)
     args = parser.parse_intermixed_args(argv)
     # Hydra's run directories have '=' in their names: what exists is a path, the rest overrides.
@@ -624,7 +637,7 @@ def main(argv: list[str] | None = None) -> None:
             for combo in combos:
                 target = _target(out, source, combo, launches)
                 start = bar.n
-                result = replay(source, combo, args.until_perturbation, bar)
+                result = replay(source, combo, args.until_perturbation, bar, args.rescore)
                 bar.update(start + lengths[source] - bar.n)  # the rest, if cut at the perturbation
                 write_replay(result, target, launches.get((source, tuple(combo))))
                 written.append(target)

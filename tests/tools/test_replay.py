@@ -276,6 +276,11 @@ def test_a_cut_replay_keeps_each_before_eval_apart(perturbed_run, tmp_path):
         "eval.json": 2,
         "eval_other/eval.json": 1,
     }
+    # --rescore: only the evaluations named (an ablation's scoring), the others left out
+    main([str(source), "--out", str(tmp_path / "some"), "--until-perturbation"]
+         + ["--rescore", "eval_before_other", "distance.y=2"])  # fmt: skip
+    run = tmp_path / "some" / "source" / "distance.y=2"
+    assert [str(p.relative_to(run)) for p in run.rglob("eval.json")] == ["eval_other/eval.json"]
 
 
 def test_an_eval_is_rescored_with_the_other_readout(perturbed_run, tmp_path):
