@@ -5,8 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from omegaconf import OmegaConf
 
-from parallax.config import ConfigError, compose, validate
+from parallax.config import ConfigError, compose, flatten, validate
 from parallax.parts import seeds_for
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
@@ -21,14 +22,35 @@ def test_default_config_composes_and_validates():
     assert cfg.distance.weighting is True
 
 
+def _own_settings(group: str, name: str) -> dict:
+    """The settings a config file of ``group`` sets itself (its defaults list aside), flattened
+    to dotted keys from the root of the config."""
+    path = CONF / group / f"{name}.yaml"
+    own = OmegaConf.to_container(OmegaConf.load(path), resolve=False)
+    own.pop("defaults", None)
+    if not own:  # a file that only names the schema's defaults
+        return {}
+    is_global = path.read_text().startswith("# @package _global_")
+    return flatten(own if is_global else {group: own})
+
+
 @pytest.mark.parametrize("name", sorted(p.stem for p in (CONF / "experiment").glob("*.yaml")))
-def test_every_experiment_composes(name):
-    validate(compose([f"experiment={name}"]))
+def test_every_experiment_composes_with_its_own_settings(name):
+    cfg = compose([f"experiment={name}"])
+    validate(cfg)
+    # no later entry of the defaults list overrides what the file itself sets
+    composed = flatten(OmegaConf.to_container(cfg, resolve=True))
+    own = _own_settings("experiment", name)
+    assert own and {key: composed.get(key) for key in own} == own
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in (CONF / "curriculum").glob("*.yaml")))
-def test_every_curriculum_composes(name):
-    validate(compose([f"curriculum={name}"]))
+def test_every_curriculum_composes_with_its_own_settings(name):
+    cfg = compose([f"curriculum={name}"])
+    validate(cfg)
+    composed = flatten(OmegaConf.to_container(cfg, resolve=True))
+    own = _own_settings("curriculum", name)
+    assert {key: composed.get(key) for key in own} == own
 
 
 @pytest.mark.parametrize(
