@@ -223,6 +223,11 @@ px_score_sources() {
       fi
       if px_needs_eval "$model/checkpoint_before_perturbation.pt" "$run/eval_before_textures5"; then
         parallax-eval "$model" "${args[@]}" --out "$run/eval_before_textures5" || status=$?
+      elif [[ ! -f "$model/checkpoint_before_perturbation.pt" ]] \
+          && ! compgen -G "$run/eval_before_textures5/eval.json*" > /dev/null; then
+        echo "[launch] $run: no model before its perturbation (in the run or $model), so no" \
+          "scoring on five photographs per distance: train it again" >&2
+        status=1
       fi
     done < <(find "$source" -name summary.json -not -path '*/.*' -print0 2>/dev/null)
   done

@@ -447,7 +447,7 @@ def test_a_model_is_evaluated_again_only_when_its_checkpoint_is_newer_than_its_e
 
 def test_the_distance_ablations_score_each_source_with_its_own_or_its_committed_model(tmp_path):
     runs, committed = tmp_path / "runs", tmp_path / "report" / "checkpoints"
-    for name in ("experiment=a,seed=3", "experiment=b,seed=1", "experiment=c,seed=0"):
+    for name in ("experiment=a,seed=3", "experiment=b,seed=1", "experiment=c,seed=0", "d"):
         (runs / name).mkdir(parents=True)
         (runs / name / "summary.json").write_text("{}")
     (committed / "a_seed3").mkdir(parents=True)  # a's model only among the committed ones
@@ -465,9 +465,12 @@ def test_the_distance_ablations_score_each_source_with_its_own_or_its_committed_
     env = {**os.environ, "REPORT_ROOT": str(tmp_path / "report")}
     env.pop("PARALLAX_DRY_RUN", None)
     result = subprocess.run(["bash", "-c", command], env=env, capture_output=True, text=True)
-    assert result.returncode == 0, result.stderr
     evals = sorted(l.split()[1] for l in result.stdout.splitlines() if l.startswith("EVAL "))
     assert evals == [str(committed / "a_seed3"), str(runs / "experiment=b,seed=1")]
+    # d has no model anywhere and no scoring: said, and the status says it failed
+    assert result.returncode == 1 and f"{runs / 'd'}: no model before its perturbation" in (
+        result.stderr
+    )
 
 
 def test_the_ablations_script_trains_scales_and_replays_the_reproduction(tmp_path):
