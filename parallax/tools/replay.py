@@ -145,6 +145,7 @@ def replay(
     until_perturbation: bool = False,
     bar: Any = None,
     rescore: Sequence[str] | None = None,
+    so_far: bool = False,
 ) -> dict:
     """The source run's summary with the distance learner re-run under `overrides`.
 
@@ -153,12 +154,14 @@ def replay(
     alike), so that the ablation tables of parallax-report compare the unperturbed models (Table 4,
     not Table 5). A run never perturbed is replayed whole. ``bar``: a progress bar that moves on
     by each presentation replayed. ``rescore``: the folders (relative to the run, "." for its own)
-    of the evaluations to score again with the replayed learner; None: every one.
+    of the evaluations to score again with the replayed learner; None: every one. ``so_far``: a
+    run still training is replayed as far as its record goes (its learner's fits and online
+    predictions, for the analyses; no summary of its own, so nothing to write as a run).
     """
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
     summary_path = run_dir / SUMMARY_NAME
-    if not summary_path.is_file():
+    if not summary_path.is_file() and not so_far:
         raise ReplayError(f"{run_dir} has no {SUMMARY_NAME}: replay finished runs only")
     try:
         cfg.merge_with_dotlist(list(overrides))
@@ -166,7 +169,11 @@ def replay(
         raise ReplayError(
             f"cannot apply {list(overrides)} to {run_dir}: {str(exc).splitlines()[0]}"
         ) from None
-    summary = json.loads(summary_path.read_text())
+    summary = (
+        json.loads(summary_path.read_text())
+        if summary_path.is_file()
+        else {"presentations": len(read_stream(run_dir)), "before_perturbation": None}
+    )
     if int(cfg.train.threads) > 0:
         # as in training and parallax-eval: replays side by side, each with several intra-op
         # threads, would oversubscribe the cores

@@ -107,3 +107,12 @@ def test_a_replay_reads_the_same_figures_and_each_blocks_own_predictions(tmp_pat
     nc.main([str(run), "--blocks", "4", "--replay", "distance.warm_start=false"])
     out = capsys.readouterr().out
     assert "distance.warm_start=false" in out and out.count(str(run)) == 2
+    # a run still training (no summary yet) is replayed as far as its record goes
+    (run / "summary.json").unlink()
+    lines = (run / "metrics.jsonl").read_text().splitlines(keepends=True)
+    (run / "metrics.jsonl").write_text("".join(lines[:6]))
+    so_far = nc.replayed_network_calls(run, ["distance.warm_start=false"], blocks=4)
+    assert [row["fits"] for row in so_far] == [row["fits"] for row in fresh[:1]] + [
+        sum(1 for line in lines[4:6] if json.loads(line).get("lm_trained"))
+    ]
+    assert so_far[0] == fresh[0]

@@ -14,7 +14,8 @@ block's end, and the eye's recent error (eq. 16, the trainer's window) there.
 ``--replay KEY=VALUE…`` replays each run's distance learner with those settings first
 (parallax-replay: the same eye movements) and reads the same figures from the replay, with the
 online error of each block's own predictions: whether a network trained that way follows the eye
-as it changes, e.g. ``--replay distance.warm_start=false`` (a new network at every fit).
+as it changes, e.g. ``--replay distance.warm_start=false`` (a new network at every fit). A run
+still training is read, and replayed, as far as its record goes.
 """
 
 from __future__ import annotations
@@ -83,7 +84,7 @@ def replayed_network_calls(
     """:func:`network_calls` of the run's distance learner replayed with ``overrides``; each
     block's distance error is the mean of its own online predictions (|d̂ − d|/d, %)."""
     run_dir = Path(run_dir)
-    result = replay(run_dir, list(overrides))
+    result = replay(run_dir, list(overrides), so_far=True)  # a run still training: so far
     cfg = result["config"]
     kept_is_unchanged = float(cfg.distance.validation_fraction) > 0 and cfg.distance.warm_start
     fits = {presentation: (epochs, stopped) for presentation, epochs, stopped in result["fits"]}
