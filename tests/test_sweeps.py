@@ -345,13 +345,21 @@ def test_the_reproduction_does_not_train_a_finished_run_again(tmp_path):
         (tmp_path / "recipe" / folder / ".hydra" / "overrides.yaml").write_text(
             "".join(f"- {o}\n" for o in overrides)
         )
-    (tmp_path / "recipe" / "done" / "summary.json").write_text("{}")
-    (tmp_path / "recipe" / "smoke" / "summary.json").write_text("{}")
+    for folder, seed in (("done", 3), ("smoke", 4)):
+        (tmp_path / "recipe" / folder / "summary.json").write_text("{}")
+        (tmp_path / "recipe" / folder / "config.yaml").write_text(f"seed: {seed}\n")
+        (tmp_path / "recipe" / folder / "checkpoint.pt").write_bytes(b"")
     # the dry run also estimates the family's wall time from a bench report's process cases
     report = tmp_path / "bench.json"
     two = {"processes": 2, "steps_per_second": 400.0}
     report.write_text(json.dumps({"processes": {"this code": {"two": two}}}))
-    lines = _dry_run("reproduce.sh", tmp_path, "recipe", BENCH_REPORT=str(report))
+    lines = _dry_run(
+        "reproduce.sh", tmp_path, "recipe", BENCH_REPORT=str(report), HEADLINE_SEEDS="3,0,1,2,4"
+    )
+    # the first headline seed's model is committed, no other's
+    kept = [l for l in lines if l.startswith("cp ")]
+    assert len(kept) == 1 and f"{tmp_path}/recipe/done/checkpoint.pt" in kept[0], kept
+    assert kept[0].rstrip().endswith("checkpoints/recipe_multi_5_20_weighted_seed3/")
     trained = [l for l in lines if "parallax-train" in l]
     headline = [l for l in trained if "experiment=recipe_multi_5_20_weighted " in l]
     assert len(headline) == 1 and headline[0].rstrip().endswith("seed=0\\,1\\,2\\,4"), trained
