@@ -169,6 +169,26 @@ def test_a_replays_record_keeps_its_learners_keys_and_a_trained_run_is_refused(t
     assert "mae_g01.png" not in json.dumps(report)
 
 
+def test_a_single_positions_repeated_scalars_are_left_to_their_dict_and_read_back(tmp_path):
+    runs = _runs(tmp_path / "runs", np.random.default_rng(2))[:2]
+    single = [
+        {**line, "mae": 1 / 3, "mae_per_position": {"13": 1 / 3}, "mae_recent": 0.25}
+        | {"mae_recent_per_position": {"13": 0.25}}
+        for line in read_metrics(runs[0])
+    ]
+    several = [{**line, "mae": 0.5, "mae_per_position": {"5": 0.4, "20": 0.6}} for line in single]
+    for run, lines in zip(runs, (single, several), strict=True):
+        (run / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in lines))
+    compact(runs, keep="reports")
+    raw = [json.loads(line) for line in read_record(runs[0] / "metrics.jsonl").splitlines()]
+    assert not {"mae", "mae_recent"} & set(raw[0])  # repeated in their dicts: left out
+    assert [(r["mae"], r["mae_recent"]) for r in read_metrics(runs[0])] == [
+        (0.3333333, 0.25)
+    ] * len(single)
+    kept = [json.loads(line) for line in read_record(runs[1] / "metrics.jsonl").splitlines()]
+    assert all(line["mae"] == 0.5 for line in kept)  # several positions: the scalar stays
+
+
 def test_rounding_reaches_the_numbers_inside_lists_and_dicts():
     from parallax.tools.report.compact import rounded
 

@@ -48,6 +48,7 @@ from parallax.health import DIVERGED_NAME
 from parallax.run_folder import RunLock, RunLocked, probe_all
 from parallax.tools.report.runs import (
     METRICS_NAME,
+    REPEATED,
     SUMMARY_NAME,
     ReportError,
     eval_files,
@@ -113,21 +114,35 @@ def rounded(value: Any) -> Any:
     return value
 
 
+def without_repeats(line: dict[str, Any]) -> dict[str, Any]:
+    """``line`` less each scalar its per-position dict of one entry repeats exactly (a single
+    position's; REPEATED), which read_metrics puts back."""
+    kept = dict(line)
+    for scalar, per_position in REPEATED.items():
+        values = kept.get(per_position)
+        if isinstance(values, dict) and len(values) == 1 and scalar in kept:
+            if next(iter(values.values())) == kept[scalar]:
+                del kept[scalar]
+    return kept
+
+
 def kept_line(line: dict[str, Any], keep: str) -> dict[str, Any]:
     """What ``--keep replay``, ``reports`` or ``distance`` keeps of one metrics.jsonl line."""
     if keep == "reports":
-        return {k: rounded(v) for k, v in line.items() if k in READ_BY_REPORTS}
+        return without_repeats({k: rounded(v) for k, v in line.items() if k in READ_BY_REPORTS})
     if keep == "distance":
         return {
             k: rounded(v)
             for k, v in line.items()
             if k in REPLAY_OWN or k in FIT_KEYS or k.startswith(FIT_PREFIX)
         }
-    return {
-        k: v if k in REPLAYED else rounded(v)
-        for k, v in line.items()
-        if k in REPLAYED or k in READ_BY_REPORTS or k in FIT_KEYS or k.startswith(FIT_PREFIX)
-    }
+    return without_repeats(
+        {
+            k: v if k in REPLAYED else rounded(v)
+            for k, v in line.items()
+            if k in REPLAYED or k in READ_BY_REPORTS or k in FIT_KEYS or k.startswith(FIT_PREFIX)
+        }
+    )
 
 
 def thin_metrics(run: Path, keep: str) -> None:

@@ -38,6 +38,9 @@ METRICS_NAME = "metrics.jsonl"
 RUN_CONFIG_NAME = "config.yaml"
 HYDRA_CONFIG = Path(".hydra") / "config.yaml"
 HYDRA_OVERRIDES = Path(".hydra") / "overrides.yaml"
+#: Scalars of a metrics line that a single position's line repeats in a per-position dict of one
+#: entry: a compacted record keeps the dict alone, and :func:`read_metrics` puts the scalar back.
+REPEATED = {"mae": "mae_per_position", "mae_recent": "mae_recent_per_position"}
 
 
 class ReportError(ValueError):
@@ -327,17 +330,23 @@ def load_run(path: Path) -> Run:
 
 
 def read_metrics(path: Path) -> list[dict]:
-    """metrics.jsonl's records, plain or compressed (:func:`record_file`); a torn last line (a
-    run killed while writing) is skipped."""
+    """metrics.jsonl's records, plain or compressed (:func:`record_file`), each with the scalars
+    a compacted record left to its per-position dict (REPEATED); a torn last line (a run killed
+    while writing) is skipped."""
     metrics = Path(path) / METRICS_NAME
     if record_file(metrics) is None:
         return []
     records = []
     for line in read_record(metrics).splitlines():
         try:
-            records.append(json.loads(line))
+            record = json.loads(line)
         except json.JSONDecodeError:
             continue
+        for scalar, per_position in REPEATED.items():
+            values = record.get(per_position)
+            if scalar not in record and isinstance(values, dict) and len(values) == 1:
+                record[scalar] = next(iter(values.values()))
+        records.append(record)
     return records
 
 
