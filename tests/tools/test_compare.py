@@ -66,6 +66,21 @@ def test_three_columns_and_the_cells_worse_than_the_paper(tmp_path):
             "distance_by_range": {"total": 2.5},
             "trials": 36,
         },
+        # five photographs per distance, and the eye as trained: neither pooled with the above
+        {
+            "perturbed": True,
+            "stimuli_overrides": [],
+            "textures_per_distance": 5,
+            "distance_by_range": {"total": 1.7},
+            "trials": 355,
+        },
+        {
+            "perturbed": True,
+            "stimuli_overrides": [],
+            "split": "train",
+            "distance_by_range": {"total": 0.2},
+            "trials": 71,
+        },
     ]
     (tmp_path / "unsourced.json").write_text(json.dumps(_family(0.5, 9.0, [])))
     (tmp_path / "recipe.json").write_text(json.dumps(_family(0.1, 0.5, evals)))
@@ -103,6 +118,9 @@ def test_three_columns_and_the_cells_worse_than_the_paper(tmp_path):
     assert f"unsourced, Table 2, {paper.SINGLE} at 5 cm" not in text
     sceptic = {(r["textures"], r["phase"]): r for r in data["sceptic"]}
     assert sceptic[("held-out photographs, grid", "after")]["trials_per_seed"] == [71]
+    assert sceptic[("held-out photographs, grid", "after")]["total"]["mean"] == 1.1
+    assert sceptic[("held-out photographs, 5 per distance, grid", "after")]["total"]["n"] == 1
+    assert not [r for r in data["sceptic"] if "train" in r["textures"] or r["total"]["mean"] == 0.2]
     assert sceptic[("held-out photographs, between", "after")]["total"]["mean"] == 1.3
     assert sceptic[("dead_leaves, grid", "after")]["total"]["mean"] == 2.5
     # the leave-one-out report is linked only where it exists

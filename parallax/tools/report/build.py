@@ -68,6 +68,8 @@ def _run_record(run: Run) -> dict:
                 "presentations": e.get("presentations"),
                 "perturbed": e.get("perturbed"),
                 "stimuli_overrides": e.get("stimuli_overrides") or [],
+                "split": (e.get("stimuli") or {}).get("split", "heldout"),
+                "textures_per_distance": int(e.get("textures_per_distance") or 1),
                 "distance_by_range": (e.get("distance") or {}).get("by_range"),
                 "trials": (e.get("distance") or {}).get("trials"),
                 "between_grid_by_range": (e.get("distance_between_grid") or {}).get("by_range"),

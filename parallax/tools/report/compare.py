@@ -221,6 +221,14 @@ def worse_lines(number: int | str, worse: list[dict], compared: Counter) -> list
     return lines
 
 
+def _evaluated_on(evaluation: dict) -> str:
+    """What an evaluation of the report's records ran on: the kind of textures and how many per
+    distance, so that no row pools two."""
+    kind = _kind(evaluation.get("stimuli_overrides") or [])
+    per_distance = int(evaluation.get("textures_per_distance") or 1)
+    return kind if per_distance == 1 else f"{kind}, {per_distance} per distance"
+
+
 def _kind(overrides: Sequence[str]) -> str:
     if not overrides:
         return TEXTURES_PHOTOGRAPHS
@@ -247,9 +255,10 @@ def sceptic_table(families: dict[str, dict]) -> tuple[str, list[dict]]:
                 measured: dict[str, dict[str, list]] = {}
                 for run in group["runs"]:
                     for e in run.get("evals", []):
-                        if bool(e.get("perturbed")) != perturbed:
+                        # the eye as trained (the training split) has tables of its own
+                        if bool(e.get("perturbed")) != perturbed or e.get("split") == "train":
                             continue
-                        kind = _kind(e.get("stimuli_overrides") or [])
+                        kind = _evaluated_on(e)
                         parts = [("grid", "distance_by_range", "trials")]
                         if e.get("between_trials"):
                             parts.append(("between", "between_grid_by_range", "between_trials"))
