@@ -24,7 +24,9 @@ fit statistics lm_* and the online distance error), each number kept to SIGNIFIC
 keys in REPLAYED exactly, so that parallax-replay of the kept record is bit-identical to that of
 the whole one; ``reports`` only the READ_BY_REPORTS keys, rounded: what the reports, the figures
 and the analysis tools read of a run that nothing replays (a single position, a speed of the
-continuous sweep). Rounding halves what is left (the reports print three or four digits).
+continuous sweep). Rounding halves what is left (the reports print three or four digits). Both
+leave a single position's ``mae`` and ``mae_recent`` to the one-entry per-position dicts that
+repeat them (``REPEATED``), which ``read_metrics`` puts back.
 ``distance``, for the records of parallax-replay alone, only what the replay changed: the distance
 learner's keys (FIT_KEYS, lm_*, which presentations it learnt from), rounded. A replay's eye is its
 source's (``replayed_from`` in its summary), whose record keeps it, so the reports draw no eye
