@@ -169,10 +169,11 @@ def replay(
         raise ReplayError(
             f"cannot apply {list(overrides)} to {run_dir}: {str(exc).splitlines()[0]}"
         ) from None
+    records = read_stream(run_dir)
     summary = (
         json.loads(summary_path.read_text())
         if summary_path.is_file()
-        else {"presentations": len(read_stream(run_dir)), "before_perturbation": None}
+        else {"presentations": len(records), "before_perturbation": None}
     )
     if int(cfg.train.threads) > 0:
         # as in training and parallax-eval: replays side by side, each with several intra-op
@@ -181,7 +182,6 @@ def replay(
     learner = distance_learner(cfg)
     tracker = _OnlineHistory(window=int(cfg.metrics.distance_window))
     before = before_learner = None
-    records = read_stream(run_dir)
     if len(records) < int(summary["presentations"]):
         raise ReplayError(
             f"{run_dir / METRICS_NAME} has {len(records)} presentations, the summary "
