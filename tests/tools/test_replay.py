@@ -118,6 +118,12 @@ def test_a_replay_as_launched_is_the_run_its_launch_trains(perturbed_run, tmp_pa
         main([str(source), "--out", str(tmp_path / "no"), "--as-launched", "distance.y=2.0"])
     assert stop.value.code == 2 and not (tmp_path / "no").exists()
     assert "composes other settings" in capsys.readouterr().err
+    # so is a source whose launch cannot be read
+    (source / ".hydra" / "overrides.yaml").write_text("- [unclosed\n")
+    with pytest.raises(SystemExit) as stop:
+        main([str(source), "--out", str(tmp_path / "no"), "--as-launched", "distance.y=2.0"])
+    assert stop.value.code == 2 and not (tmp_path / "no").exists()
+    assert "no readable .hydra/overrides.yaml" in capsys.readouterr().err
 
 
 def test_until_perturbation_is_the_unperturbed_run(perturbed_run):
