@@ -9,6 +9,8 @@
 #   px_eval SWEEP_DIR [CHECKPOINT [SUBDIR [ARGS...]]]   parallax-eval every finished run whose
 #                                eval.json (in RUN/SUBDIR; plain or compacted) is missing or older
 #                                than its checkpoint (N_JOBS at a time; log in RUN/SUBDIR/eval.log).
+#   px_needs_eval MODEL CHECKPOINT OUT   that choice, for any model (px_eval_record OUT: its record).
+#   px_committed_model RUN       where the reproduction commits RUN's models.
 #   px_report OUT NAME TITLE TABLES SWEEP_DIR...   parallax-report into OUT/NAME.
 #   px_paired NAME FACTOR BASELINE RUNS...   every value of FACTOR against BASELINE as
 #                                paired differences with 95 % intervals and verdicts
@@ -107,7 +109,7 @@ px_eval() {
   local todo=() summary run out failed=0
   while IFS= read -r -d '' summary; do
     run="$(dirname "$summary")"
-    if px_needs_eval "$run/$checkpoint" "$run${subdir:+/$subdir}"; then
+    if px_needs_eval "$run" "$checkpoint" "$run${subdir:+/$subdir}"; then
       todo+=("$run")
     fi
   done < <(find "$sweep_dir" -name summary.json -not -path '*/.*' -print0 2>/dev/null)
@@ -132,15 +134,34 @@ px_eval() {
   return "$failed"
 }
 
-px_needs_eval() {
-  # px_needs_eval CHECKPOINT OUT: whether CHECKPOINT exists and OUT holds no eval.json of it, plain
-  # or compacted (a compacted copy keeps the plain file's modification time), newer than it
-  local record
-  [[ -f "$1" ]] || return 1
-  for record in "$2"/eval.json{,.xz,.gz}; do
-    [[ -f "$record" ]] && break
+px_eval_record() {
+  # px_eval_record OUT: prints OUT's eval.json, plain or compacted (a committed record), if any
+  local file
+  for file in "$1"/eval.json{,.xz,.gz}; do
+    [[ -f "$file" ]] && { printf '%s\n' "$file"; return 0; }
   done
-  [[ ! -f "$record" || "$1" -nt "$record" ]]
+  return 1
+}
+
+px_needs_eval() {
+  # px_needs_eval MODEL CHECKPOINT OUT: whether MODEL/CHECKPOINT exists and OUT holds no eval of it,
+  # or (OUT inside MODEL: the run's own model) one older than it; a committed model's date is the
+  # checkout's, so its evaluation is only made when missing (a compacted copy keeps the plain
+  # file's modification time)
+  local record
+  [[ -f "$1/$2" ]] || return 1
+  record="$(px_eval_record "$3")" || return 0
+  [[ ( "$3" == "$1" || "$3" == "$1"/* ) && "$1/$2" -nt "$record" ]]
+}
+
+px_committed_model() {
+  # px_committed_model RUN: where the reproduction commits RUN's models (config and both
+  # checkpoints): $report_root/checkpoints/<experiment>_seed<n>, read from RUN's launch overrides
+  # and config.yaml
+  local experiment seed
+  experiment="$(sed -n 's/^- experiment=//p' "$1/.hydra/overrides.yaml" 2>/dev/null)"
+  seed="$(sed -n 's/^seed: //p' "$1/config.yaml" 2>/dev/null)"
+  printf '%s/checkpoints/%s_seed%s' "$report_root" "${experiment:-<experiment>}" "${seed:-<seed>}"
 }
 
 px_report() {
@@ -207,7 +228,7 @@ print(OmegaConf.select(OmegaConf.load(sys.argv[1]), sys.argv[2], throw_on_missin
 }
 
 px_score_sources() {
-  local source summary run model name status=0
+  local source summary run model status=0
   local args=(--checkpoint checkpoint_before_perturbation.pt --robots 16 --greedy-only --between none
     --textures 5)
   if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then
@@ -216,15 +237,14 @@ px_score_sources() {
   fi
   for source in "${distance_sources[@]}"; do
     while IFS= read -r -d '' summary; do
-      run="$(dirname "$summary")" name="$(basename "$run")" model="$run"
-      if [[ ! -f "$model/checkpoint_before_perturbation.pt" \
-            && "$name" =~ ^experiment=([^,]+),seed=([0-9]+)$ ]]; then
-        model="$report_root/checkpoints/${BASH_REMATCH[1]}_seed${BASH_REMATCH[2]}"
+      run="$(dirname "$summary")" model="$run"
+      if [[ ! -f "$model/checkpoint_before_perturbation.pt" ]]; then
+        model="$(px_committed_model "$run")"
       fi
-      if px_needs_eval "$model/checkpoint_before_perturbation.pt" "$run/eval_before_textures5"; then
+      if px_needs_eval "$model" checkpoint_before_perturbation.pt "$run/eval_before_textures5"; then
         parallax-eval "$model" "${args[@]}" --out "$run/eval_before_textures5" || status=$?
       elif [[ ! -f "$model/checkpoint_before_perturbation.pt" ]] \
-          && ! compgen -G "$run/eval_before_textures5/eval.json*" > /dev/null; then
+          && ! px_eval_record "$run/eval_before_textures5" > /dev/null; then
         echo "[launch] $run: no model before its perturbation (in the run or $model), so no" \
           "scoring on five photographs per distance: train it again" >&2
         status=1

@@ -86,27 +86,12 @@ other_kinds=(
 
 status=0
 evals=()  # one parallax-eval command line each, run N_JOBS at a time
-eval_record() {  # OUT: prints OUT/eval.json, or its compressed form (a committed record), if any
-  local file
-  for file in "$1/eval.json" "$1/eval.json.xz" "$1/eval.json.gz"; do
-    [[ -f "$file" ]] && { printf '%s\n' "$file"; return 0; }
-  done
-  return 1
-}
-eval_due() {  # MODEL CHECKPOINT OUT: the checkpoint exists and OUT/eval.json is missing, or older
-  # than the run's own checkpoint (a committed copy's date is the checkout's: only when missing)
-  local model="$1" ckpt="$2" out="$3" record
-  [[ -n "${PARALLAX_DRY_RUN:-}" ]] && return 0
-  [[ -f "$model/$ckpt" ]] || return 1
-  record="$(eval_record "$out")" || return 0
-  [[ "$out" == "$model"* && "$model/$ckpt" -nt "$record" ]]
-}
 queue_eval() {  # MODEL CHECKPOINT OUT ARGS...: queue an eval unless OUT/eval.json is up to date;
   # ARGS may start with env.stimuli.KEY=VALUE settings, which go right after MODEL
   local model="$1" ckpt="$2" out="$3" settings=()
   shift 3
   while (( $# )) && [[ "$1" == env.stimuli.* ]]; do settings+=("$1"); shift; done
-  if eval_due "$model" "$ckpt" "$out"; then
+  if [[ -n "${PARALLAX_DRY_RUN:-}" ]] || px_needs_eval "$model" "$ckpt" "$out"; then
     evals+=("$(printf '%q ' parallax-eval "$model" "${settings[@]}" --checkpoint "$ckpt" --out "$out" "$@")")
     eval_logs+=("$out/eval.log")
   fi
@@ -145,11 +130,6 @@ train_unrecorded() {  # SWEEP SEEDS NAME...: one sweep per set of seeds that sti
   done < <(printf '%s\n' "${!names_by_seeds[@]}" | sort)
 }
 
-kept_model() {  # NAME RUN: where the reproduction keeps the models (config and both checkpoints)
-  # of RUN, a run of experiment NAME
-  printf '%s/checkpoints/%s_seed%s' "$report_root" "$1" "$(sed -n 's/^seed: //p' "$2/config.yaml")"
-}
-
 keep_models() {  # SWEEP NAME...: the models of the first headline seed's finished runs, committed
   # beside the records so that anyone can run parallax-eval or parallax-render on them (every
   # run's evaluations are committed; the other seeds' models are not, to keep the repository light)
@@ -160,7 +140,7 @@ keep_models() {  # SWEEP NAME...: the models of the first headline seed's finish
     while IFS= read -r run; do
       [[ -f "$run/summary.json" && -f "$run/checkpoint.pt" ]] || continue
       [[ "$(sed -n 's/^seed: //p' "$run/config.yaml")" == "$first" ]] || continue
-      keep="$(kept_model "$name" "$run")"
+      keep="$(px_committed_model "$run")"
       px_run mkdir -p "$keep"
       px_run cp "$run/config.yaml" "$run/checkpoint.pt" "$run/checkpoint_before_perturbation.pt" "$keep/"
     done < <(px_runs_with "$sweep" "experiment=$name")
@@ -199,7 +179,7 @@ evaluate() {  # SWEEP NAME...: the evaluations of those experiments' finished mo
       model="$run"
       if [[ -z "${PARALLAX_DRY_RUN:-}" && ! -f "$run/checkpoint.pt" ]]; then
         # a committed record: a headline model is kept in docs/results/checkpoints
-        model="$(kept_model "$name" "$run")"
+        model="$(px_committed_model "$run")"
       fi
       queue_eval "$model" checkpoint.pt "$run" "${args[@]}"
       queue_eval "$model" checkpoint_before_perturbation.pt "$run/eval_before" "${args[@]}"
@@ -308,10 +288,10 @@ done
 mapfile -t headline_runs < <(px_runs_with "$(px_record_dir recipe)" experiment=recipe_multi_5_20_weighted)
 eval_dirs=()
 for run in "${headline_runs[@]}"; do
-  eval_record "$run/eval_before" > /dev/null && eval_dirs+=("$run/eval_before")
+  px_eval_record "$run/eval_before" > /dev/null && eval_dirs+=("$run/eval_before")
 done
 for run in "${headline_runs[@]}"; do
-  eval_record "$run" > /dev/null && eval_dirs+=("$run")
+  px_eval_record "$run" > /dev/null && eval_dirs+=("$run")
 done
 if (( ${#eval_dirs[@]} )); then
   px_run python -m parallax.tools.analysis.eye_bound "${eval_dirs[@]}" \

@@ -433,31 +433,40 @@ def test_distance_ablations_replay_their_source_runs(script, tmp_path):
 
 
 def test_a_model_is_evaluated_again_only_when_its_checkpoint_is_newer_than_its_eval(tmp_path):
-    """px_eval's choice: a compacted eval.json counts as the plain one."""
-    run = tmp_path / "run"
+    """The evaluations' choice: a compacted eval.json counts as the plain one, and a committed
+    model (its date is the checkout's) is evaluated only where its evaluation is missing."""
+    run, committed = tmp_path / "run", tmp_path / "checkpoints" / "a_seed0"
     (run / "eval_before").mkdir(parents=True)
+    committed.mkdir(parents=True)
 
-    def needs(checkpoint: str, out: str) -> bool:
-        command = f"source {REPO}/launch/ablation_lib.sh; px_needs_eval {run}/{checkpoint} {out}"
+    def needs(model: Path, checkpoint: str, out: Path) -> bool:
+        command = f"source {REPO}/launch/ablation_lib.sh; px_needs_eval {model} {checkpoint} {out}"
         env = {**os.environ, "PARALLAX_DRY_RUN": "1"}
         return subprocess.run(["bash", "-c", command], env=env).returncode == 0
 
-    assert not needs("checkpoint.pt", run)  # no model
+    assert not needs(run, "checkpoint.pt", run)  # no model
     (run / "checkpoint.pt").write_bytes(b"")
-    assert needs("checkpoint.pt", run)  # no eval
+    assert needs(run, "checkpoint.pt", run)  # no eval
     (run / "eval.json.xz").write_bytes(b"")
     os.utime(run / "checkpoint.pt", (1_000_000_000, 1_000_000_000))
-    assert not needs("checkpoint.pt", run)  # evaluated, compacted
+    assert not needs(run, "checkpoint.pt", run)  # evaluated, compacted
     os.utime(run / "checkpoint.pt", (2_000_000_000, 2_000_000_000))
-    assert needs("checkpoint.pt", run)  # trained further since
-    assert needs("checkpoint.pt", run / "eval_before")
+    assert needs(run, "checkpoint.pt", run)  # trained further since
+    assert needs(run, "checkpoint.pt", run / "eval_before")
+    (committed / "checkpoint.pt").write_bytes(b"")  # newer than the run's eval, but committed
+    assert not needs(committed, "checkpoint.pt", run)
+    assert needs(committed, "checkpoint.pt", run / "eval_before")
 
 
 def test_the_distance_ablations_score_each_source_with_its_own_or_its_committed_model(tmp_path):
     runs, committed = tmp_path / "runs", tmp_path / "report" / "checkpoints"
     for name in ("experiment=a,seed=3", "experiment=b,seed=1", "experiment=c,seed=0", "d"):
-        (runs / name).mkdir(parents=True)
+        (runs / name / ".hydra").mkdir(parents=True)
         (runs / name / "summary.json").write_text("{}")
+        if name != "d":  # a committed model is found from the run's launch settings
+            experiment, seed = (part.split("=")[1] for part in name.split(","))
+            (runs / name / ".hydra" / "overrides.yaml").write_text(f"- experiment={experiment}\n")
+            (runs / name / "config.yaml").write_text(f"seed: {seed}\n")
     (committed / "a_seed3").mkdir(parents=True)  # a's model only among the committed ones
     (committed / "a_seed3" / "checkpoint_before_perturbation.pt").write_bytes(b"")
     for name in ("experiment=b,seed=1", "experiment=c,seed=0"):  # models of their own
