@@ -15,6 +15,7 @@ import pytest
 from parallax.config import compose
 from parallax.tools.report.build import build_report
 from parallax.tools.report.compact import compact, compress, main
+from parallax.tools.report.figures import eye_records
 from parallax.tools.report.runs import eval_files, load_run, read_metrics, read_record
 from tests.tools.test_report import write_eval, write_run
 
@@ -157,16 +158,24 @@ def test_a_replays_record_keeps_its_learners_keys_and_a_trained_run_is_refused(t
     assert exc.value.code == 2
     assert "not a replay" in capsys.readouterr().err
     assert record.read_text() == "".join(json.dumps(r) + "\n" for r in lines)  # untouched
+    source = tmp_path / "source"  # the eye the replays replayed, outside the reported folder
+    source.mkdir()
+    (source / "metrics.jsonl").write_text(record.read_text())
     for run in runs:
         summary = json.loads((run / "summary.json").read_text())
-        (run / "summary.json").write_text(json.dumps({**summary, "replayed_from": "source"}))
+        (run / "summary.json").write_text(json.dumps({**summary, "replayed_from": str(source)}))
     compact([root], keep="distance")
     kept = read_metrics(runs[0])
     assert {"mae", "mae_per_position", "pans"}.isdisjoint(kept[0])
     assert kept[0]["lm_loss"] == 0.3333333 and kept[0]["distance_error"] == 0.6666667
     assert [line["presentation"] for line in kept] == [line["presentation"] for line in lines]
-    report, _ = build_report([root], tmp_path / "report", tables="paper")  # no eye curve drawn
-    assert "mae_g01.png" not in json.dumps(report)
+    # the replays' eye curve is their source's, read from it
+    assert eye_records(load_run(runs[0])) == read_metrics(source)
+    report, _ = build_report([root], tmp_path / "report", tables="paper")
+    assert "mae_g01.png" in json.dumps(report)
+    (source / "metrics.jsonl").unlink()  # a source gone is said, not a curve quietly left out
+    with pytest.raises(FileNotFoundError, match="its source's, .*source, which has no metrics"):
+        build_report([root], tmp_path / "report2", tables="paper")
 
 
 def test_a_single_positions_repeated_scalars_are_left_to_their_dict_and_read_back(tmp_path):

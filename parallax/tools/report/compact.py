@@ -29,8 +29,8 @@ leave a single position's ``mae`` and ``mae_recent`` to the one-entry per-positi
 repeat them (``REPEATED``), which ``read_metrics`` puts back.
 ``distance``, for the records of parallax-replay alone, only what the replay changed: the distance
 learner's keys (FIT_KEYS, lm_*, which presentations it learnt from), rounded. A replay's eye is its
-source's (``replayed_from`` in its summary), whose record keeps it, so the reports draw no eye
-curve of a replay; a record that is not a replay's is refused.
+source's (``replayed_from`` in its summary), whose record keeps it and which the reports read for
+a replay's eye curve; a record that is not a replay's is refused.
 """
 
 from __future__ import annotations

@@ -27,10 +27,29 @@ class Curves:
     perturbation_at: float | None
 
 
+def eye_records(run) -> list[dict]:
+    """A run's metrics records with the eye's keys: a replay's eye is its source's
+    (``replayed_from``; its compacted record keeps only its distance learner's), up to the
+    replay's last presentation. Empty if the run has none; a replay whose source's record is
+    missing is an error, not a curve quietly left out."""
+    records = read_metrics(run.path)
+    if not records or "mae" in records[0]:
+        return records
+    source = (run.summary or {}).get("replayed_from")
+    if not source:
+        return []
+    eye = read_metrics(Path(source))
+    if not eye:
+        raise FileNotFoundError(
+            f"{run.path}: a replay whose eye is its source's, {source}, which has no metrics record"
+        )
+    last = records[-1].get("steps", float("inf"))
+    return [rec for rec in eye if rec.get("steps", 0) <= last]
+
+
 def group_curves(group: Group) -> Curves | None:
-    """Mean and sd over seeds of the sliding-window MAE, aligned by presentation (of the
-    records that keep the eye's: a replay's compacted record keeps only its learner's)."""
-    records = [rec for rec in (read_metrics(r.path) for r in group.runs) if rec and "mae" in rec[0]]
+    """Mean and sd over seeds of the sliding-window MAE, aligned by presentation."""
+    records = [rec for rec in (eye_records(r) for r in group.runs) if rec and "mae" in rec[0]]
     if not records:
         return None
     length = min(len(r) for r in records)
