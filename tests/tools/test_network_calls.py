@@ -116,3 +116,19 @@ def test_a_replay_reads_the_same_figures_and_each_blocks_own_predictions(tmp_pat
         sum(1 for line in lines[4:6] if json.loads(line).get("lm_trained"))
     ]
     assert so_far[0] == fresh[0]
+
+
+def test_what_the_eye_allows_is_small_for_a_perfect_eye_and_large_for_a_blind_one():
+    from parallax.config import compose
+    from parallax.tools.analysis.eye_bound import perfect_pans
+    from tests.conftest import TINY
+
+    cfg = compose([*TINY, "distance.initial_epochs=200"])
+    laterals = tuple(float(l) for l in cfg.curriculum.lateral_positions)
+    distances = [3.0 + 0.1 * (k % 71) for k in range(60)]
+    pans = perfect_pans(laterals, tuple(distances))
+    records = [{"pans": [list(p)], "distances": [d]} for p, d in zip(pans, distances)]
+    perfect = nc.eye_allows(cfg, records, "pans")
+    blind = [{**r, "pans": [[0.0] * len(laterals)]} for r in records]  # the same vector each time
+    assert perfect["median"] < 5.0 < nc.eye_allows(cfg, blind, "pans")["median"]
+    assert nc.eye_allows(cfg, records[:19], "pans") is None  # too few for five folds
