@@ -29,9 +29,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from tqdm import tqdm
-
 import numpy as np
+from tqdm import tqdm
 
 from parallax.config import load_run_config
 from parallax.readouts import READOUTS
