@@ -132,3 +132,22 @@ def test_what_the_eye_allows_is_small_for_a_perfect_eye_and_large_for_a_blind_on
     blind = [{**r, "pans": [[0.0] * len(laterals)]} for r in records]  # the same vector each time
     assert perfect["median"] < 5.0 < nc.eye_allows(cfg, blind, "pans")["median"]
     assert nc.eye_allows(cfg, records[:19], "pans") is None  # too few for five folds
+
+
+def test_the_eyes_vectors_split_into_a_learnable_bias_a_scatter_and_misses():
+    from parallax.config import compose
+    from parallax.tools.analysis.eye_bound import perfect_pans
+    from tests.conftest import TINY
+
+    cfg = compose(TINY)
+    laterals = tuple(float(l) for l in cfg.curriculum.lateral_positions)
+    distances = [3.0 + 0.5 * k for k in range(10)]
+    undershoot = perfect_pans(laterals, tuple(distances)) - 0.3  # a bias alone
+    records = [{"pans": [list(p)], "distances": [d]} for p, d in zip(undershoot, distances)]
+    alone = nc.eye_figures(cfg, records, "pans")
+    assert alone["bias"] == pytest.approx(-0.3) and alone["mae"] == pytest.approx(0.3)
+    assert alone["scatter"] == pytest.approx(0.0, abs=1e-9) and alone["missed"] == 0.0
+    records[4]["pans"][0][0] += 2.0  # one presentation misses α* by 1.7° at its first position
+    missed = nc.eye_figures(cfg, records, "pans")
+    assert missed["missed"] == pytest.approx(0.1) and missed["scatter"] > 0.1
+    assert nc.eye_figures(cfg, [{"distances": [3.0]}], "pans") is None  # no vectors logged

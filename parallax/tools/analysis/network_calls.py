@@ -9,7 +9,11 @@ it started from: with a warm start (``distance.warm_start``), it leaves the netw
 Per run and block of presentations (before and after §5's perturbation, or ``--blocks N``) this
 prints the fits logged, the share that left the network unchanged, their mean accepted epochs,
 the share that each rule stopped, the online distance error (total, the trainer's window) at the
-block's end, and the eye's recent error (eq. 16, the trainer's window) there.
+block's end, the eye's recent error (eq. 16, the trainer's window) there, and the eye as the
+network sees it: the block's vectors s against α* (degrees), split into their mean |error|, their
+bias (the mean signed error, which a network can learn), their scatter (the sd about each lateral
+position's bias, which it cannot) and the share of presentations that missed α* by more than
+``eye_bound.FAILED_MISS_DEG`` at some lateral position.
 
 ``--replay KEY=VALUE…`` replays each run's distance learner with those settings first
 (parallax-replay: the same eye movements) and reads the same figures from the replay, with the
@@ -34,7 +38,11 @@ from tqdm import tqdm
 
 from parallax.config import load_run_config
 from parallax.readouts import READOUTS
-from parallax.tools.analysis.eye_bound import network_cross_validated
+from parallax.tools.analysis.eye_bound import (
+    FAILED_MISS_DEG,
+    network_cross_validated,
+    perfect_pans,
+)
 from parallax.tools.replay import replay
 from parallax.tools.report.runs import read_metrics
 
@@ -82,7 +90,31 @@ def network_calls(run_dir: str | Path, blocks: int | None = None) -> list[dict]:
     # validation stop and starts from the last fit's weights
     kept_is_unchanged = float(cfg.distance.validation_fraction) > 0 and cfg.distance.warm_start
     max_fail = int(cfg.distance.max_fail) if kept_is_unchanged else None
-    return [block_figures(part, max_fail) for part in _blocks(records, blocks)]
+    key = READOUTS[str(cfg.train.distance_readout)].key
+    return [
+        {**block_figures(part, max_fail), "eye": eye_figures(cfg, part, key)}
+        for part in _blocks(records, blocks)
+    ]
+
+
+def eye_figures(cfg, records: list[dict], key: str) -> dict | None:
+    """The block's vectors s (``key``) against α* at each lateral position, in degrees: mean
+    |error|, bias (mean signed error), scatter (sd about each position's own bias) and the share
+    of presentations with a miss beyond FAILED_MISS_DEG at some position; None without s."""
+    pans = [p for r in records for p in r.get(key) or []]
+    distances = [d for r in records for d in r.get("distances") or []]
+    if not pans or len(pans) != len(distances):
+        return None
+    laterals = tuple(float(l) for l in cfg.curriculum.lateral_positions)
+    grid = sorted(set(distances))
+    targets = perfect_pans(laterals, tuple(grid))[[grid.index(d) for d in distances]]
+    errors = np.asarray(pans, float) - targets
+    return {
+        "mae": float(np.abs(errors).mean()),
+        "bias": float(errors.mean()),
+        "scatter": float((errors - errors.mean(axis=0)).std()),
+        "missed": float((np.abs(errors) > FAILED_MISS_DEG).any(axis=1).mean()),
+    }
 
 
 def replayed_network_calls(
@@ -126,6 +158,7 @@ def replayed_network_calls(
         row["distance_error"] = float(np.mean(own)) if own else None
         row["distance_error_median"] = float(np.median(own)) if own else None
         row["eye_allows"] = eye_allows(cfg, sources, key)
+        row["eye"] = eye_figures(cfg, sources, key)
         rows.append(row)
     return rows
 
@@ -197,9 +230,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     allows = " what the eye allows |" if args.replay else ""
     print(
         f"| run | presentations | fits | unchanged | mean epochs | {stops} | distance error |"
-        f"{allows} eye (°) |"
+        f"{allows} eye, recent (°) | s: mean abs error (°) | s: bias (°) | s: scatter (°) | "
+        f"s: missed by > {FAILED_MISS_DEG:g}° |"
     )
-    print("|---" * (8 + len(RULES) + bool(args.replay)) + "|")
+    print("|---" * (12 + len(RULES) + bool(args.replay)) + "|")
     for run, rows in results:
         for row in rows:
             epochs = "–" if row["epochs"] is None else f"{row['epochs']:.2f}"
@@ -209,10 +243,17 @@ def main(argv: Sequence[str] | None = None) -> None:
             if args.replay:
                 allowed = row["eye_allows"] or {}
                 error += f" | {_error(allowed.get('mean'), allowed.get('median'))}"
+            s = row["eye"]
+            vectors = (
+                "– | – | – | –"
+                if s is None
+                else f"{s['mae']:.3f} | {s['bias']:+.3f} | {s['scatter']:.3f} | "
+                f"{_share(s['missed'])}"
+            )
             print(
                 f"| {run} | {row['first']}–{row['last']} | {row['fits']} | "
                 f"{_share(row['unchanged'])} | {epochs} | {shares} | {error} | "
-                f"{'–' if eye is None else f'{eye:.3f}'} |"
+                f"{'–' if eye is None else f'{eye:.3f}'} | {vectors} |"
             )
 
 
