@@ -118,3 +118,12 @@ def test_several_settings_make_one_factor_and_name_each_row(tmp_path):
     assert weighted["mean"] == pytest.approx(-1.0)
     with pytest.raises(pa.ReportError, match="no setting distance.why"):
         pa.ablation([tmp_path], "distance.weighting,distance.why")
+
+
+def test_numbers_in_the_values_are_ordered_as_numbers(tmp_path):
+    for y in (10.0, 2.0, 0.25, 1.0):
+        _run(tmp_path / f"y{y}", 0, y, 0.2, [5.0, 6.0, 7.0])
+    result = pa.ablation([tmp_path], "distance.y")
+    assert [row["value"] for row in result["rows"]] == ["0.25", "1.0", "2.0", "10.0"]
+    assert result["baseline"] == "0.25"  # the first, so ordered
+    assert sorted(["c=1000", "c=50", "c=300"], key=pa.natural_order) == ["c=50", "c=300", "c=1000"]

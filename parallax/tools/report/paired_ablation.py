@@ -3,8 +3,8 @@ differences against its baseline, each with a 95 % interval and a verdict.
 
 The runs (trained, or replayed by parallax-replay) below DIR differ in the setting KEY (e.g.
 ``coder.scales``, ``distance.y``, ``distance.queue_size``) and in their seed; each value of KEY
-is compared with the baseline value (``--baseline``, default the first in sorted order) on the
-seeds both have, measure by measure, before and after §5's perturbation:
+is compared with the baseline value (``--baseline``, default the first, its numbers ordered as
+numbers) on the seeds both have, measure by measure, before and after §5's perturbation:
 
 - ``eye``: the last 100 trials' mean eye error at each lateral position (Tables 2–3), paired
   position by position;
@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -112,10 +113,16 @@ def runs_by_value(paths: Sequence[str | Path], factor: str) -> dict[str, dict[in
     return by_value
 
 
+def natural_order(value: str) -> list:
+    """A sort key that orders the numbers inside a value as numbers (c = 50, 100, 300, 1000)."""
+    parts = re.split(r"(-?\d+(?:\.\d+)?)", value)
+    return [(0, float(part), "") if k % 2 else (1, 0.0, part) for k, part in enumerate(parts)]
+
+
 def ablation(paths: Sequence[str | Path], factor: str, baseline: str | None = None) -> dict:
     """Every value of ``factor`` against the baseline, measure by measure and phase by phase."""
     by_value = runs_by_value(paths, factor)
-    values = sorted(by_value)
+    values = sorted(by_value, key=natural_order)
     baseline = baseline if baseline is not None else values[0]
     if baseline not in by_value:
         raise ReportError(f"--baseline {baseline}: the values of {factor} are {values}")
