@@ -178,6 +178,24 @@ def test_a_replays_record_keeps_its_learners_keys_and_a_trained_run_is_refused(t
         build_report([root], tmp_path / "report2", tables="paper")
 
 
+def test_a_replays_eye_is_drawn_once_with_its_sources(tmp_path):
+    root = tmp_path / "runs"
+    sources = _runs(root, np.random.default_rng(2))[:2]
+    unweighted = compose(["experiment=recipe_multi_5_20_weighted", "train.presentations=10"])
+    unweighted.distance.weighting = False
+    for k, source in enumerate(sources):  # each seed's learner replayed without the weighting
+        replay = root / "replays" / source.name
+        write_run(replay, unweighted, k, np.random.default_rng(k))
+        summary = json.loads((replay / "summary.json").read_text())
+        (replay / "summary.json").write_text(json.dumps({**summary, "replayed_from": str(source)}))
+    compact([root / "replays"], keep="distance")
+    build_report([root], tmp_path / "report", tables="paper")
+    text = (tmp_path / "report" / "README.md").read_text()
+    assert text.count("](mae_g0") == 1  # two groups, one eye
+    (said,) = [line for line in text.splitlines() if "drawn there" in line]
+    assert "weighting=False: the same eye movements as g0" in said  # drawn with its source
+
+
 def test_a_single_positions_repeated_scalars_are_left_to_their_dict_and_read_back(tmp_path):
     runs = _runs(tmp_path / "runs", np.random.default_rng(2))[:2]
     single = [

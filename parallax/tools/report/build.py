@@ -19,6 +19,7 @@ from omegaconf.errors import OmegaConfBaseException
 from parallax.tools.console import header, progress
 from parallax.tools.report.figures import (
     Figures,
+    eye_source,
     figure_ablation,
     figure_distance,
     figure_mae_curves,
@@ -244,10 +245,27 @@ def build_report(
             "as a thin line; the gray dashed line is where the perturbation starts.",
             "",
         ]
-        for g in groups:
+        # one figure per set of eye movements, drawn with the runs that made them where they
+        # are reported (a replay's are its source's)
+        eyes = {g.gid: frozenset(eye_source(r) for r in g.runs) for g in groups}
+        owner: dict[frozenset, str] = {}
+        for g in sorted(
+            groups, key=lambda g: any(eye_source(r) != Path(r.path).resolve() for r in g.runs)
+        ):
             if curves[g.gid] is not None:
-                png = figure_mae_curves(figures, g, curves[g.gid])
-                md += [f"**{g.gid}** — {g.label}", "", f"![{g.gid}]({png})", ""]
+                owner.setdefault(eyes[g.gid], g.gid)
+        for g in groups:
+            if curves[g.gid] is None:
+                continue
+            if owner[eyes[g.gid]] != g.gid:
+                md += [
+                    f"**{g.gid}** — {g.label}: the same eye movements as {owner[eyes[g.gid]]} "
+                    "(one replays the other's runs, or both replay the same runs), drawn there.",
+                    "",
+                ]
+                continue
+            png = figure_mae_curves(figures, g, curves[g.gid])
+            md += [f"**{g.gid}** — {g.label}", "", f"![{g.gid}]({png})", ""]
 
     md += ["## Failed or unfinished jobs", ""]
     if failed:

@@ -47,6 +47,11 @@ def eye_records(run) -> list[dict]:
     return [rec for rec in eye if rec.get("steps", 0) <= last]
 
 
+def eye_source(run) -> Path:
+    """The run whose eye movements ``run`` made or replayed: a replay's source, else itself."""
+    return Path((run.summary or {}).get("replayed_from") or run.path).resolve()
+
+
 def group_curves(group: Group) -> Curves | None:
     """Mean and sd over seeds of the sliding-window MAE, aligned by presentation."""
     records = [rec for rec in (eye_records(r) for r in group.runs) if rec and "mae" in rec[0]]
