@@ -151,3 +151,8 @@ def test_the_eyes_vectors_split_into_a_learnable_bias_a_scatter_and_misses():
     missed = nc.eye_figures(cfg, records, "pans")
     assert missed["missed"] == pytest.approx(0.1) and missed["scatter"] > 0.1
     assert nc.eye_figures(cfg, [{"distances": [3.0]}], "pans") is None  # no vectors logged
+    where = nc.eye_by_position(cfg, records, "pans")  # the miss is at the first position, at 5 m
+    first, *others = where["positions"].values()
+    assert first["missed"] == pytest.approx(0.1) and all(o["missed"] == 0.0 for o in others)
+    assert all(o["bias"] == pytest.approx(-0.3) for o in others)
+    assert where["ranges"] == {"3-4.9": 0.0, "5-6.9": 0.25, "7-10": 0.0}

@@ -13,7 +13,9 @@ block's end, the eye's recent error (eq. 16, the trainer's window) there, and th
 network sees it: the block's vectors s against α* (degrees), split into their mean |error|, their
 bias (the mean signed error, which a network can learn), their scatter (the sd about each lateral
 position's bias, which it cannot) and the share of presentations that missed α* by more than
-``eye_bound.FAILED_MISS_DEG`` at some lateral position.
+``eye_bound.FAILED_MISS_DEG`` at some lateral position. ``--positions`` also prints, for each phase
+(before and after the perturbation), the same split at every lateral position, and the share of
+presentations missed in each of Table 4's distance ranges: where the eye's misses are.
 
 ``--replay KEY=VALUE…`` replays each run's distance learner with those settings first
 (parallax-replay: the same eye movements) and reads the same figures from the replay, with the
@@ -37,6 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 from parallax.config import load_run_config
+from parallax.distance.metrics import RANGES
 from parallax.readouts import READOUTS
 from parallax.tools.analysis.eye_bound import (
     FAILED_MISS_DEG,
@@ -97,10 +100,9 @@ def network_calls(run_dir: str | Path, blocks: int | None = None) -> list[dict]:
     ]
 
 
-def eye_figures(cfg, records: list[dict], key: str) -> dict | None:
-    """The block's vectors s (``key``) against α* at each lateral position, in degrees: mean
-    |error|, bias (mean signed error), scatter (sd about each position's own bias) and the share
-    of presentations with a miss beyond FAILED_MISS_DEG at some position; None without s."""
+def _pan_errors(cfg, records: list[dict], key: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """The vectors s (``key``) minus α* (degrees, presentations × lateral positions) and the
+    presentations' distances; None without s."""
     pans = [p for r in records for p in r.get(key) or []]
     distances = [d for r in records for d in r.get("distances") or []]
     if not pans or len(pans) != len(distances):
@@ -108,7 +110,42 @@ def eye_figures(cfg, records: list[dict], key: str) -> dict | None:
     laterals = tuple(float(l) for l in cfg.curriculum.lateral_positions)
     grid = sorted(set(distances))
     targets = perfect_pans(laterals, tuple(grid))[[grid.index(d) for d in distances]]
-    errors = np.asarray(pans, float) - targets
+    return np.asarray(pans, float) - targets, np.asarray(distances, float)
+
+
+def eye_by_position(cfg, records: list[dict], key: str) -> dict | None:
+    """:func:`eye_figures` at each lateral position (by its label in cm), and the share of
+    presentations with a miss beyond FAILED_MISS_DEG in each distance range; None without s."""
+    found = _pan_errors(cfg, records, key)
+    if found is None:
+        return None
+    errors, distances = found
+    positions = {}
+    for k, lateral in enumerate(cfg.curriculum.lateral_positions):
+        e = errors[:, k]
+        positions[f"{100 * float(lateral):g}"] = {
+            "mae": float(np.abs(e).mean()),
+            "bias": float(e.mean()),
+            "scatter": float(e.std()),
+            "missed": float((np.abs(e) > FAILED_MISS_DEG).mean()),
+        }
+    missed = (np.abs(errors) > FAILED_MISS_DEG).any(axis=1)
+    ranges = {}
+    for name, (low, high, high_included) in RANGES.items():
+        grid = np.round(distances, 9)
+        inside = (grid >= low) & ((grid <= high) if high_included else (grid < high))
+        ranges[name] = float(missed[inside].mean()) if inside.any() else None
+    return {"positions": positions, "ranges": ranges}
+
+
+def eye_figures(cfg, records: list[dict], key: str) -> dict | None:
+    """The block's vectors s (``key``) against α* at each lateral position, in degrees: mean
+    |error|, bias (mean signed error), scatter (sd about each position's own bias) and the share
+    of presentations with a miss beyond FAILED_MISS_DEG at some position; None without s."""
+    found = _pan_errors(cfg, records, key)
+    if found is None:
+        return None
+    errors = found[0]
     return {
         "mae": float(np.abs(errors).mean()),
         "bias": float(errors.mean()),
@@ -203,6 +240,11 @@ def main(argv: Sequence[str] | None = None) -> None:
         help="presentations a block (default: before and after §5's perturbation)",
     )
     parser.add_argument(
+        "--positions",
+        action="store_true",
+        help="also print, per phase, the eye's vectors at each lateral position and distance range",
+    )
+    parser.add_argument(
         "--replay",
         nargs="+",
         metavar="KEY=VALUE",
@@ -255,6 +297,35 @@ def main(argv: Sequence[str] | None = None) -> None:
                 f"{_share(row['unchanged'])} | {epochs} | {shares} | {error} | "
                 f"{'–' if eye is None else f'{eye:.3f}'} | {vectors} |"
             )
+
+    if args.positions:
+        for run in args.runs:
+            print_positions(run)
+
+
+def print_positions(run: str) -> None:
+    """The ``--positions`` tables of one run, per phase."""
+    cfg = load_run_config(run)
+    key = READOUTS[str(cfg.train.distance_readout)].key
+    for part in _blocks(read_metrics(run), None):
+        found = eye_by_position(cfg, part, key)
+        if found is None:
+            continue
+        phase = "after the perturbation" if part[0].get("perturbed") else "before the perturbation"
+        first, last = part[0]["presentation"], part[-1]["presentation"]
+        print(f"\n{run}, {phase} (presentations {first}–{last}):")
+        print(
+            f"| lateral position | s: mean abs error (°) | s: bias (°) | s: scatter (°) | "
+            f"s: missed by > {FAILED_MISS_DEG:g}° |"
+        )
+        print("|---|---|---|---|---|")
+        for label, figures in found["positions"].items():
+            print(
+                f"| {label} cm | {figures['mae']:.3f} | {figures['bias']:+.3f} | "
+                f"{figures['scatter']:.3f} | {_share(figures['missed'])} |"
+            )
+        ranges = ", ".join(f"{name} m {_share(share)}" for name, share in found["ranges"].items())
+        print(f"\npresentations missed at some lateral position, by distance: {ranges}")
 
 
 def _error(mean: float | None, median: float | None = None) -> str:
