@@ -196,6 +196,22 @@ def test_a_replays_eye_is_drawn_once_with_its_sources(tmp_path):
     assert "weighting=False: the same eye movements as g0" in said  # drawn with its source
 
 
+def test_replays_alone_are_compared_with_the_setting_of_the_runs_they_replay(tmp_path):
+    source = tmp_path / "source"  # a recipe run: c = 100, not the shipped default
+    cfg = compose(["experiment=recipe_multi_5_20_weighted", "train.presentations=10"])
+    write_run(source, cfg, 0, np.random.default_rng(0))
+    for c in (50, 100, 300):
+        replay = tmp_path / "replays" / f"c{c}"
+        cfg.distance.queue_size = c
+        write_run(replay, cfg, 0, np.random.default_rng(c))
+        summary = json.loads((replay / "summary.json").read_text())
+        (replay / "summary.json").write_text(json.dumps({**summary, "replayed_from": str(source)}))
+    assert compose([]).distance.queue_size != 100
+    build_report([tmp_path / "replays"], tmp_path / "report", tables="ablation")
+    text = (tmp_path / "report" / "README.md").read_text()
+    assert "| 100 (baseline) |" in text and "| 300 (baseline) |" not in text
+
+
 def test_a_single_positions_repeated_scalars_are_left_to_their_dict_and_read_back(tmp_path):
     runs = _runs(tmp_path / "runs", np.random.default_rng(2))[:2]
     single = [

@@ -82,6 +82,31 @@ def _run_record(run: Run) -> dict:
     }
 
 
+def ablation_defaults(runs: Sequence[Run]) -> dict:
+    """The settings an ablation's values are compared with (its baseline): where every finished
+    run replays another (parallax-replay), the settings of the first run replayed, which the
+    replays vary; else the shipped default configuration."""
+    finished = [r for r in runs if r.problem is None]
+    sources = {(r.summary or {}).get("replayed_from") for r in finished}
+    if finished and None not in sources:
+        try:
+            source = load_run(Path(sorted(sources)[0]))
+        except (OSError, OmegaConfBaseException, ReportError):
+            source = None  # a source moved or unreadable: the shipped defaults
+        if source is not None and source.problem is None:
+            return source.flat
+    try:
+        return default_flat_config()
+    except (HydraException, OmegaConfBaseException) as exc:
+        # a shipped config that no longer composes must not hide the results
+        print(
+            f"parallax-report: warning: cannot compose the default config ({exc}); "
+            "ablation baselines are the most common values",
+            file=sys.stderr,
+        )
+        return {}
+
+
 def build_report(
     paths: Sequence[str | Path],
     out: Path | None = None,
@@ -106,17 +131,7 @@ def build_report(
     runs = [load_run(p) for p in progress(run_dirs, desc="reading runs", unit="run", leave=False)]
     failed = [r for r in runs if r.problem is not None]
     groups, duplicates = group_runs(runs)
-    try:
-        defaults = default_flat_config()
-    except (HydraException, OmegaConfBaseException) as exc:
-        # a shipped config that no longer composes must not hide the results
-        print(
-            f"parallax-report: warning: cannot compose the default config ({exc}); "
-            "ablation baselines are the most common values",
-            file=sys.stderr,
-        )
-        defaults = {}
-    factors = find_factors(groups, defaults)
+    factors = find_factors(groups, ablation_defaults(runs))
     label_groups(groups, factors)
 
     stem = Path(name).stem

@@ -3,7 +3,8 @@
 Runs that differ only by `seed` (and by settings that do not change results) form a group;
 every number of the report is a `Stat` over a group's seeds: mean ± sample sd, with n. A
 setting that varies between groups is a `Factor`: one ablation table each, with the shipped
-default as its baseline.
+default as its baseline (for replays, the setting of the runs they replay: the report's
+``ablation_defaults``).
 """
 
 from __future__ import annotations
