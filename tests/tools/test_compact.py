@@ -210,6 +210,9 @@ def test_replays_alone_are_compared_with_the_setting_of_the_runs_they_replay(tmp
     build_report([tmp_path / "replays"], tmp_path / "report", tables="ablation")
     text = (tmp_path / "report" / "README.md").read_text()
     assert "| 100 (baseline) |" in text and "| 300 (baseline) |" not in text
+    # one eye for every c: its bars are drawn, its curves not overlaid on themselves
+    assert "(ablation_distance.queue_size.png)" in text
+    assert "ablation_distance.queue_size_mae.png" not in text
 
 
 def test_a_single_positions_repeated_scalars_are_left_to_their_dict_and_read_back(tmp_path):

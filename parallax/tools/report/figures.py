@@ -186,7 +186,8 @@ def figure_distance(
 def figure_ablation(
     figures: Figures, factor: Factor, rows: Sequence[Group], curves: dict[str, Curves | None]
 ) -> list[str]:
-    """One ablation's bar plot (final MAE, total distance error) and its MAE curves overlaid."""
+    """One ablation's bar plot (final MAE, total distance error) and its MAE curves overlaid
+    (where the settings' eye movements differ: not for replays of the same runs)."""
     from parallax.tools import plots
 
     names = []
@@ -213,7 +214,9 @@ def figure_ablation(
         for label, g in zip(labels, rows)
         if (c := curves.get(g.gid)) is not None
     }
-    if overlay:
+    # replays of the same runs share one eye: curves that could only coincide are not overlaid
+    one_eye = len({frozenset(eye_source(r) for r in g.runs) for g in rows}) == 1
+    if overlay and not one_eye:
         path = figures.path(f"ablation_{_slug(factor.key)}_mae")
         if path is not None:
             plots.mean_sd_curves(overlay, path, f"Eye-movement MAE by {factor.key}")
