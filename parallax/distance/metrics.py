@@ -45,11 +45,18 @@ def distance_error_by_range(
         bad = truths[~np.isfinite(truths) | (truths <= 0)][0]
         raise ValueError(f"true distances must be positive and finite, got {bad!r}")
     errors = 100.0 * np.abs(estimates - truths) / truths
-    # 3.0 + 20·0.1 may land a hair below 5.0
-    grid = np.round(truths if at is None else _as_array(at), 9)
     result: dict[str, float] = {}
-    for name, (low, high, high_included) in RANGES.items():
-        inside = (grid >= low) & ((grid <= high) if high_included else (grid < high))
+    for name, inside in range_masks(truths if at is None else at).items():
         result[name] = float(errors[inside].mean()) if inside.any() else math.nan
     result["total"] = float(errors.mean())
     return result
+
+
+def range_masks(distances: Sequence[float] | np.ndarray | torch.Tensor) -> dict[str, np.ndarray]:
+    """Which of ``distances`` (metres) fall in each of RANGES, as boolean masks."""
+    # 3.0 + 20·0.1 may land a hair below 5.0
+    grid = np.round(_as_array(distances), 9)
+    return {
+        name: (grid >= low) & ((grid <= high) if high_included else (grid < high))
+        for name, (low, high, high_included) in RANGES.items()
+    }

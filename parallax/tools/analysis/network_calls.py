@@ -39,7 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 from parallax.config import load_run_config
-from parallax.distance.metrics import RANGES
+from parallax.distance.metrics import range_masks
 from parallax.readouts import READOUTS
 from parallax.tools.analysis.eye_bound import (
     FAILED_MISS_DEG,
@@ -93,18 +93,28 @@ def network_calls(run_dir: str | Path, blocks: int | None = None) -> list[dict]:
     # validation stop and starts from the last fit's weights
     kept_is_unchanged = float(cfg.distance.validation_fraction) > 0 and cfg.distance.warm_start
     max_fail = int(cfg.distance.max_fail) if kept_is_unchanged else None
-    key = READOUTS[str(cfg.train.distance_readout)].key
+    key = readout_key(cfg)
     return [
         {**block_figures(part, max_fail), "eye": eye_figures(cfg, part, key)}
         for part in _blocks(records, blocks)
     ]
 
 
+def readout_key(cfg) -> str:
+    """The metrics key of the vectors s the run's distance learner reads."""
+    return READOUTS[str(cfg.train.distance_readout)].key
+
+
+def _vectors(records: list[dict], key: str) -> tuple[list, list]:
+    """The presentations' vectors s (``key``) and their distances, as logged."""
+    pans = [p for r in records for p in r.get(key) or []]
+    return pans, [d for r in records for d in r.get("distances") or []]
+
+
 def _pan_errors(cfg, records: list[dict], key: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The vectors s (``key``) minus α* (degrees, presentations × lateral positions) and the
     presentations' distances; None without s."""
-    pans = [p for r in records for p in r.get(key) or []]
-    distances = [d for r in records for d in r.get("distances") or []]
+    pans, distances = _vectors(records, key)
     if not pans or len(pans) != len(distances):
         return None
     laterals = tuple(float(l) for l in cfg.curriculum.lateral_positions)
@@ -130,11 +140,10 @@ def eye_by_position(cfg, records: list[dict], key: str) -> dict | None:
             "missed": float((np.abs(e) > FAILED_MISS_DEG).mean()),
         }
     missed = (np.abs(errors) > FAILED_MISS_DEG).any(axis=1)
-    ranges = {}
-    for name, (low, high, high_included) in RANGES.items():
-        grid = np.round(distances, 9)
-        inside = (grid >= low) & ((grid <= high) if high_included else (grid < high))
-        ranges[name] = float(missed[inside].mean()) if inside.any() else None
+    ranges = {
+        name: float(missed[inside].mean()) if inside.any() else None
+        for name, inside in range_masks(distances).items()
+    }
     return {"positions": positions, "ranges": ranges}
 
 
@@ -184,7 +193,7 @@ def replayed_network_calls(
             }
         )
     max_fail = int(cfg.distance.max_fail) if kept_is_unchanged else None
-    key = READOUTS[str(cfg.train.distance_readout)].key
+    key = readout_key(cfg)
     rows = []
     for part, sources in zip(_blocks(records, blocks), _blocks(read_metrics(run_dir), blocks)):
         row = block_figures(part, max_fail)
@@ -204,8 +213,7 @@ def eye_allows(cfg, records: list[dict], key: str, folds: int = 5) -> dict | Non
     """Mean and median error (%) of a fresh network of ``cfg``'s settings fitted to these
     presentations' own vectors s (``key``), each predicted by ``folds``-fold cross-validation;
     None for a block too small to be split so."""
-    pans = [p for r in records for p in r.get(key) or []]
-    distances = [d for r in records for d in r.get("distances") or []]
+    pans, distances = _vectors(records, key)
     if len(pans) != len(distances) or len(distances) < 4 * folds:
         return None
     estimates = network_cross_validated(cfg, pans, distances, folds)
@@ -306,7 +314,7 @@ def main(argv: Sequence[str] | None = None) -> None:
 def print_positions(run: str) -> None:
     """The ``--positions`` tables of one run, per phase."""
     cfg = load_run_config(run)
-    key = READOUTS[str(cfg.train.distance_readout)].key
+    key = readout_key(cfg)
     for part in _blocks(read_metrics(run), None):
         found = eye_by_position(cfg, part, key)
         if found is None:

@@ -19,11 +19,12 @@ from omegaconf.errors import OmegaConfBaseException
 from parallax.tools.console import header, progress
 from parallax.tools.report.figures import (
     Figures,
-    eye_source,
     figure_ablation,
     figure_distance,
     figure_mae_curves,
     group_curves,
+    group_eyes,
+    replays,
 )
 from parallax.tools.report.groups import (
     default_flat_config,
@@ -262,11 +263,9 @@ def build_report(
         ]
         # one figure per set of eye movements, drawn with the runs that made them where they
         # are reported (a replay's are its source's)
-        eyes = {g.gid: frozenset(eye_source(r) for r in g.runs) for g in groups}
+        eyes = {g.gid: group_eyes(g) for g in groups}
         owner: dict[frozenset, str] = {}
-        for g in sorted(
-            groups, key=lambda g: any(eye_source(r) != Path(r.path).resolve() for r in g.runs)
-        ):
+        for g in sorted(groups, key=replays):
             if curves[g.gid] is not None:
                 owner.setdefault(eyes[g.gid], g.gid)
         for g in groups:

@@ -52,6 +52,17 @@ def eye_source(run) -> Path:
     return Path((run.summary or {}).get("replayed_from") or run.path).resolve()
 
 
+def group_eyes(group: Group) -> frozenset[Path]:
+    """The runs whose eye movements a group's runs made or replayed: equal for two groups that
+    share their eye (one replays the other's runs, or both replay the same runs)."""
+    return frozenset(eye_source(r) for r in group.runs)
+
+
+def replays(group: Group) -> bool:
+    """Whether any of a group's runs replays another's eye movements."""
+    return any((r.summary or {}).get("replayed_from") for r in group.runs)
+
+
 def group_curves(group: Group) -> Curves | None:
     """Mean and sd over seeds of the sliding-window MAE, aligned by presentation."""
     records = [rec for rec in (eye_records(r) for r in group.runs) if rec and "mae" in rec[0]]
@@ -215,7 +226,7 @@ def figure_ablation(
         if (c := curves.get(g.gid)) is not None
     }
     # replays of the same runs share one eye: curves that could only coincide are not overlaid
-    one_eye = len({frozenset(eye_source(r) for r in g.runs) for g in rows}) == 1
+    one_eye = len({group_eyes(g) for g in rows}) == 1
     if overlay and not one_eye:
         path = figures.path(f"ablation_{_slug(factor.key)}_mae")
         if path is not None:
