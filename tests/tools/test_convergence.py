@@ -5,7 +5,9 @@ from __future__ import annotations
 import json
 
 import pytest
+from omegaconf import OmegaConf
 
+from parallax.config import compose
 from parallax.tools.analysis import convergence
 
 
@@ -53,3 +55,27 @@ def test_the_command_prints_a_row_per_run_and_refuses_a_missing_record(tmp_path,
     with pytest.raises(SystemExit) as stop:
         convergence.main([str(tmp_path / "missing")])
     assert stop.value.code == 2
+
+
+def test_the_trend_interval_tells_a_falling_tail_from_noise():
+    rng = __import__("random").Random(0)
+    noise = [0.3 + rng.gauss(0, 0.02) for _ in range(400)]
+    low, high = convergence.trend_interval(noise[200:], noise[:200], memory=50)
+    assert low < 0 < high  # a level tail: the interval holds no trend
+    trend = sum(noise[200:]) / 200 - sum(noise[:200]) / 200
+    assert (low + high) / 2 == pytest.approx(trend)  # centred on the rule's own trend
+    falling = [0.5 - 0.001 * i + rng.gauss(0, 0.02) for i in range(400)]
+    low, high = convergence.trend_interval(falling[200:], falling[:200], memory=50)
+    assert high < 0  # still falling, beyond the noise
+    assert convergence.trend_interval(noise[200:], noise[:200], memory=150) is None  # one piece
+    assert convergence.trend_interval(noise[200:], noise[:200], memory=None) is None
+
+
+def test_the_interval_is_read_with_the_run_s_figure_memory(tmp_path):
+    run = _run(tmp_path, [0.3 + 0.01 * (i % 2) for i in range(40)], 40, [0.1] * 40)
+    assert convergence.convergence(run)["before"]["trend_interval"] is None  # no config.yaml
+    (run / "config.yaml").write_text(OmegaConf.to_yaml(compose(["metrics.summary_trials=2"])))
+    assert convergence.figure_memory(run) == 2
+    found = convergence.convergence(run)["before"]
+    assert found["trend_interval"] == pytest.approx((0.0, 0.0), abs=1e-12)  # every piece alike
+    assert "(flat: +0.000° [+0.000, +0.000], 40)" in convergence._cell(found)

@@ -7,7 +7,12 @@ tables' "last 100 trials", worst lateral position; with ``--positions`` every po
 its trend: the mean of that figure over the phase's last ``--tail`` of presentations less its
 mean over the ``--tail`` before. A phase is flat when the trend is within ±``--flat`` degrees
 (means over blocks, so that the noise of a 100-trial figure does not hide a flat end, nor a slow
-drift pass for one). Then the critic's scale, mean |v·φ| (peak and last; it grows without bound
+drift pass for one). Beside the trend, its 95 % interval: each of the two blocks cut into pieces
+as long as the figure's memory (metrics.summary_trials presentations, over which one position's
+last trials reach back), the pieces' means taken as independent, a t interval on the difference
+of the blocks' means; none where a block holds fewer than two pieces or the run has no
+config.yaml. A trend beyond ±``--flat`` whose interval holds 0 is not told apart from noise.
+Then the critic's scale, mean |v·φ| (peak and last; it grows without bound
 when the natural actor-critic diverges, paper §3.4) and the policy's entropy at the end
 (ln 7 ≈ 1.95 is uniform over the seven pan steps).
 """
@@ -16,10 +21,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from scipy import stats
+
+from parallax.config.plumbing import load_run_config
 from parallax.tools.report.runs import read_metrics
 
 #: The share of a phase in each of the two blocks compared, and the trend (degrees) of a flat
@@ -31,7 +40,29 @@ def _worst(record: dict) -> float:
     return max(record["mae_recent_per_position"].values())
 
 
-def _phase(records: list[dict], tail: float, flat: float) -> dict | None:
+def trend_interval(
+    last: Sequence[float], before: Sequence[float], memory: int | None
+) -> tuple[float, float] | None:
+    """The 95 % interval of the trend mean(last) − mean(before): its half-width from pieces of
+    ``memory`` values of each block taken as independent (pooled variance, Student's t); None
+    with fewer than two whole pieces in a block, or no ``memory``."""
+    if not memory or memory < 1:
+        return None
+    pieces = []
+    for values in (last, before):
+        whole = len(values) // memory
+        if whole < 2:
+            return None
+        cut = values[len(values) - whole * memory :]  # the latest whole pieces
+        pieces.append([statistics.fmean(cut[i * memory : (i + 1) * memory]) for i in range(whole)])
+    (a, b), dof = pieces, len(pieces[0]) + len(pieces[1]) - 2
+    pooled = ((len(a) - 1) * statistics.variance(a) + (len(b) - 1) * statistics.variance(b)) / dof
+    half = stats.t.ppf(0.975, dof) * (pooled * (1 / len(a) + 1 / len(b))) ** 0.5
+    trend = statistics.fmean(last) - statistics.fmean(before)
+    return trend - half, trend + half
+
+
+def _phase(records: list[dict], tail: float, flat: float, memory: int | None) -> dict | None:
     if not records:
         return None
     block = max(1, round(len(records) * tail))
@@ -43,8 +74,19 @@ def _phase(records: list[dict], tail: float, flat: float) -> dict | None:
         "mae_recent": worst[-1],
         "per_position": dict(records[-1]["mae_recent_per_position"]),
         "trend": trend,
+        "trend_interval": trend_interval(last, before, memory),
         "flat": abs(trend) <= flat,
     }
+
+
+def figure_memory(run_dir: Path) -> int | None:
+    """How many presentations one position's last-trials figure reaches back: the run's
+    metrics.summary_trials (one trial per position and presentation); None without its
+    config.yaml."""
+    try:
+        return int(load_run_config(run_dir).metrics.summary_trials)
+    except FileNotFoundError:
+        return None
 
 
 def blocks(records: list[dict], size: int) -> list[dict]:
@@ -75,10 +117,11 @@ def convergence(
     if not records:
         raise ValueError(f"{run_dir}: metrics.jsonl holds no presentations")
     scales = [r["policy_critic_scale"] for r in records if "policy_critic_scale" in r]
+    memory = figure_memory(Path(run_dir))
     return {
         **({"blocks": blocks(records, block)} if block else {}),
-        "before": _phase([r for r in records if not r.get("perturbed")], tail, flat),
-        "after": _phase([r for r in records if r.get("perturbed")], tail, flat),
+        "before": _phase([r for r in records if not r.get("perturbed")], tail, flat, memory),
+        "after": _phase([r for r in records if r.get("perturbed")], tail, flat, memory),
         "critic_peak": max(scales) if scales else None,
         "critic_last": scales[-1] if scales else None,
         "entropy_last": records[-1].get("policy_entropy"),
@@ -89,7 +132,12 @@ def _cell(phase: dict | None) -> str:
     if phase is None:
         return "–"
     mark = "flat" if phase["flat"] else "moving"
-    return f"{phase['mae_recent']:.3f}° ({mark}: {phase['trend']:+.3f}°, {phase['presentations']})"
+    interval = phase.get("trend_interval")
+    span = "" if interval is None else f" [{interval[0]:+.3f}, {interval[1]:+.3f}]"
+    return (
+        f"{phase['mae_recent']:.3f}° ({mark}: {phase['trend']:+.3f}°{span}, "
+        f"{phase['presentations']})"
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> None:
