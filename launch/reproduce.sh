@@ -275,6 +275,12 @@ for family in "${families[@]}"; do
   if [[ -e "${singles[0]}" ]]; then
     px_run python -m parallax.tools.report.compact --keep reports "${singles[@]}" || status=$?
   fi
+  # Tables 4–5's runs whose records predate the network's score on its own queue get it from a
+  # replay as trained (a run trained now writes it itself; those are left alone)
+  multis=("$sweep"/*multi_*)
+  if [[ -e "${multis[0]}" || -n "${PARALLAX_DRY_RUN:-}" ]]; then
+    px_run python -m parallax.tools.report.queue_scores "${multis[@]}" || status=$?
+  fi
   if [[ "$family" == without ]]; then
     px_run python -m parallax.tools.report.leave_one_out "${sources[@]}" \
       "$(px_record_dir recipe)" --out "$report_root" "${notes[@]}" || status=$?
