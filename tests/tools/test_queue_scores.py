@@ -60,3 +60,7 @@ def test_a_run_whose_replay_disagrees_is_refused_and_nothing_changes(trained, tm
     with pytest.raises(SystemExit) as stop:
         queue_scores.main([str(tmp_path / "missing")])
     assert stop.value.code == 2
+    (run / "summary.json").unlink()  # a run still training: left alone
+    queue_scores.main([str(run)])
+    assert "0 summaries completed" in capsys.readouterr().out
+    assert not (run / "summary.json").exists()

@@ -8,9 +8,9 @@ trained (:func:`parallax.tools.replay.replay` without overrides, on the run's ow
 s: the learner never acts on the world, so this is the run's own learner); the replay's online
 errors must agree with the run's own to RELATIVE_TOLERANCE, and only then is the score added to
 the run's summary.json, with ``distance_error_queue_from`` saying how it was made. Every run is
-replayed and checked before any summary is written: a run that fails (not finished, a replay's
-record, errors that disagree) is named, the exit code is 2, and nothing is changed. Runs that
-already hold the score are left alone.
+replayed and checked before any summary is written: a run that fails (a replay's record, errors
+that disagree) is named, the exit code is 2, and nothing is changed. Runs that already hold the
+score, and runs without a summary.json (still training, or stopped as diverged), are left alone.
 """
 
 from __future__ import annotations
@@ -78,9 +78,10 @@ def completed_summary(run: Path) -> dict | None:
 
 
 def add_queue_scores(paths: Sequence[str | Path]) -> list[Path]:
-    """Completes the summaries of the runs at or below ``paths`` that lack the queue scores;
-    returns the runs changed. Every run is checked before any is written."""
-    runs = [run for path in paths for run in find_run_dirs(path)]
+    """Completes the summaries of the finished runs at or below ``paths`` that lack the queue
+    scores; returns the runs changed. Every run is checked before any is written."""
+    found = [run for path in paths for run in find_run_dirs(path)]
+    runs = [run for run in found if (run / SUMMARY_NAME).is_file()]
     held = probe_all(runs)
     if held is not None:
         raise held
