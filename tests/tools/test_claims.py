@@ -22,17 +22,22 @@ POSITIONS = {
 GRID = [3.0 + 0.5 * k for k in range(15)]  # 3.0 … 10.0 m
 
 
-def _eval(folder, presentations: int, perturbed: bool, errors: list[float]) -> None:
+def _eval(
+    folder, presentations: int, perturbed: bool, errors: list[float], split: str = "heldout"
+) -> None:
+    """A parallax-eval result: the greedy eye on held-out photographs, or (``split`` "train")
+    the eye as trained, whose errors are its sampled trials' (distance_sampled)."""
     folder.mkdir(parents=True, exist_ok=True)
+    key = "distance_sampled" if split == "train" else "distance"
     evaluation = {
         "presentations": presentations,
         "perturbed": perturbed,
         "stimuli_overrides": [],
-        "stimuli": {"source": "skimage", "split": "heldout", "seed": 0},
+        "stimuli": {"source": "skimage", "split": split, "seed": 0},
         "textures_per_distance": 1,
         "robots": 16,
         "mae": {"greedy": 0.1},
-        "distance": {"per_distance": {f"{d:.2f}": e for d, e in zip(GRID, errors)}},
+        key: {"per_distance": {f"{d:.2f}": e for d, e in zip(GRID, errors)}},
     }
     (folder / "eval.json").write_text(json.dumps(evaluation))
 
@@ -95,6 +100,9 @@ def _run(
         after_errors = held_out if held_out_after is None else held_out_after
         _eval(folder / "eval_before", 5, False, list(held_out))
         _eval(folder, 10, True, list(after_errors))
+        # the eye as trained: the same errors a tenth higher, on the training photographs
+        _eval(folder / "eval_before_trained", 5, False, list(held_out * 1.1), split="train")
+        _eval(folder / "eval_trained", 10, True, list(after_errors * 1.1), split="train")
     # the recent eye error falls below 0.2° at each position's presentation in ``learnt``
     learnt = learnt or {}
     records = [
@@ -151,6 +159,14 @@ def test_known_differences_get_their_verdicts(records):
     assert _claim(result, 1)["verdict"]["ours"].startswith("reproduced")
     weighting = _claim(result, 2)
     assert set(_verdicts(weighting, "ours")) == {"reproduced"}
+    # the eye as trained: its own evaluations, the unweighted side 0.5 × 1.1 higher
+    trained = [row for row in weighting["comparisons"] if "eye as trained" in row["comparison"]]
+    assert len(trained) == 4
+    before_total = trained[1]["families"]["ours"]
+    assert before_total["b"] - before_total["a"] == pytest.approx(0.55)
+    assert '--out "$RUN/eval_before_trained" --robots 16 --split train --between' in (
+        cl.markdown(result)
+    )
     # the paper family's weighting changes nothing: the same numbers, said so, never "reproduced"
     for row in weighting["comparisons"]:
         assert "same numbers" in row["families"]["paper_family"]["why"]

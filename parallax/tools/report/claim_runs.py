@@ -157,13 +157,31 @@ def eye_mean(phase: str) -> Measure:
     return read
 
 
+#: The evaluations a distance measure reads: (parallax-eval's --split, the result's key). Held
+#: out: the frozen greedy eye on held-out photographs; as trained: the learning policy's draws on
+#: the training photographs (the paper's probable scoring of Tables 4–5).
+EVALUATIONS = {"held_out": ("heldout", "distance"), "as_trained": ("train", "distance_sampled")}
+
+
 def held_out(phase: str, distance_range: str | None = None) -> Measure:
     """Held-out error (%) per grid distance of the phase's evaluation (one photograph each), in
     ``distance_range`` (a key of Tables 4–5's ranges) if given."""
+    return evaluated_error(phase, distance_range, "held_out")
+
+
+def as_trained(phase: str, distance_range: str | None = None) -> Measure:
+    """The same for the eye as trained (parallax-eval --split train)."""
+    return evaluated_error(phase, distance_range, "as_trained")
+
+
+def evaluated_error(phase: str, distance_range: str | None, scoring: str) -> Measure:
+    """Error (%) per grid distance of the phase's evaluation of the kind ``scoring`` (a key of
+    EVALUATIONS), one photograph each, in ``distance_range`` if given."""
+    split, key = EVALUATIONS[scoring]
 
     def read(run: Run) -> dict[str, float] | None:
-        found = run.eval_for(phase)
-        distance = (found or {}).get("distance") or {}
+        found = run.eval_for(phase, split=split)
+        distance = (found or {}).get(key) or {}
         if not distance.get("per_distance"):
             return None
         if int(found.get("textures_per_distance", 1)) != 1:
@@ -180,6 +198,7 @@ def held_out(phase: str, distance_range: str | None = None) -> Measure:
         } or None
 
     read.reads_distance = True
+    read.split = split
     return read
 
 

@@ -149,6 +149,8 @@ def claim_verdict(cells: Sequence[dict]) -> str:
 
 #: launch/reproduce.sh's parallax-eval options (EVAL_ARGS), for set-ups with no evaluation yet.
 EVAL_OPTIONS = "--robots 16 --greedy-only --between $(LC_ALL=C seq -s ' ' -f '%.2f' 3.05 0.2 9.85)"
+#: launch/reproduce.sh's parallax-eval options of the eye as trained (TRAINED_ARGS).
+TRAINED_OPTIONS = "--robots 16 --split train --between"
 PLAIN_PATH = re.compile(r"[\w/=,.+-]+")
 
 
@@ -184,16 +186,22 @@ def commands(comparison: Comparison, records: Records, prefix: str) -> list[tupl
     """(order, line): `parallax-train` of both sides' runs, `parallax-eval` of those whose
     evaluations the comparison reads, then `parallax-replay` (it scores the eye's evaluations)."""
     lines, trains = [], {}
-    evaluated = [(s, side.evaluated) for side in (comparison.a, comparison.b) for s in side.setups]
-    options = next(
-        (
-            _eval_options(run.eval_for(phase))
-            for setup, phase in evaluated
-            if phase
-            for run in records.runs(setup, prefix).values()
-            if run.eval_for(phase)
-        ),
-        EVAL_OPTIONS,
+    sides = (comparison.a, comparison.b)
+    split = next((getattr(side.measure, "split", "heldout") for side in sides), "heldout")
+    evaluated = [(s, side.evaluated) for side in sides for s in side.setups]
+    options = (
+        TRAINED_OPTIONS
+        if split == "train"
+        else next(
+            (
+                _eval_options(run.eval_for(phase))
+                for setup, phase in evaluated
+                if phase
+                for run in records.runs(setup, prefix).values()
+                if run.eval_for(phase)
+            ),
+            EVAL_OPTIONS,
+        )
     )
     for setup, phase in evaluated:
         found = records.runs(setup, prefix)
@@ -215,6 +223,8 @@ def commands(comparison: Comparison, records: Records, prefix: str) -> list[tupl
                 if phase == "before"
                 else ("checkpoint.pt", "")
             )
+            if split == "train":  # reproduce.sh's folders of the eye as trained
+                out = "/eval_before_trained" if phase == "before" else "/eval_trained"
             paths = (
                 _paths({s: relpath(r.path) for s, r in found.items()})
                 if found
