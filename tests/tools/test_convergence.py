@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import random
 
 import pytest
 from omegaconf import OmegaConf
@@ -58,7 +59,7 @@ def test_the_command_prints_a_row_per_run_and_refuses_a_missing_record(tmp_path,
 
 
 def test_the_trend_interval_tells_a_falling_tail_from_noise():
-    rng = __import__("random").Random(0)
+    rng = random.Random(0)
     noise = [0.3 + rng.gauss(0, 0.02) for _ in range(400)]
     low, high = convergence.trend_interval(noise[200:], noise[:200], memory=50)
     assert low < 0 < high  # a level tail: the interval holds no trend

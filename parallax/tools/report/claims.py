@@ -186,9 +186,9 @@ def commands(comparison: Comparison, records: Records, prefix: str) -> list[tupl
     """(order, line): `parallax-train` of both sides' runs, `parallax-eval` of those whose
     evaluations the comparison reads, then `parallax-replay` (it scores the eye's evaluations)."""
     lines, trains = [], {}
-    sides = (comparison.a, comparison.b)
-    split = next((getattr(side.measure, "split", "heldout") for side in sides), "heldout")
-    evaluated = [(s, side.evaluated) for side in sides for s in side.setups]
+    # both sides of a comparison read the same kind of evaluation
+    split = getattr(comparison.a.measure, "split", "heldout")
+    evaluated = [(s, side.evaluated) for side in (comparison.a, comparison.b) for s in side.setups]
     options = (
         TRAINED_OPTIONS
         if split == "train"
