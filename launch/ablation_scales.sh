@@ -7,14 +7,16 @@
 # Both scales together are each family's own runs (launch/reproduce.sh). The runs live in
 # docs/results/runs/ablation_scales (RECORD_ROOT; committed, compacted, resumable), then
 # parallax-eval of each run before and after its perturbation, as the reproduction evaluates.
-# Extra arguments are Hydra overrides for every run. launch/ablation_lib.sh lists the environment
-# settings (LAUNCHER, N_JOBS, …).
+# Extra arguments are Hydra overrides for every run. EXPERIMENTS (comma-separated, default both
+# above) picks the families' set-ups, e.g. EXPERIMENTS=recipe_multi_5_20_weighted for ours alone.
+# launch/ablation_lib.sh lists the other environment settings (LAUNCHER, N_JOBS, …).
 set -euo pipefail
 # shellcheck disable=SC1091
 source "$(dirname "${BASH_SOURCE[0]}")/ablation_lib.sh"
 runs="$(px_record_dir ablation_scales)"
 status=0
-px_sweep "$runs" experiment=paper_multi_5_10,recipe_multi_5_20_weighted coder=coarse,fine \
+experiments="${EXPERIMENTS:-paper_multi_5_10,recipe_multi_5_20_weighted}"
+px_sweep "$runs" "experiment=$experiments" coder=coarse,fine \
   "seed=${SEEDS:-0,1,2}" "$@" || status=$?
 # as the reproduction evaluates its models (launch/reproduce.sh, EVAL_ARGS): the greedy eye on
 # held-out photographs at each grid distance and between them
@@ -25,7 +27,7 @@ px_run python -m parallax.tools.report.compact "$runs" --keep replay || status=$
 px_report "$report_root/ablations" scales.md "Ablation: coarse and fine scales (paper §3.3)" \
   ablation "$runs" || status=$?
 # each scale alone against both, the family's own runs of the set-up, paired by seed
-for name in paper_multi_5_10 recipe_multi_5_20_weighted; do
+for name in ${experiments//,/ }; do
   mapfile -t alone < <(px_runs_with "$runs" "experiment=$name")
   mapfile -t both < <(px_runs_with "$(px_record_dir "${name%%_*}")" "experiment=$name")
   if [[ -n "${PARALLAX_DRY_RUN:-}" ]]; then

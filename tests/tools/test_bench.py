@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 
 import pytest
+import torch
 
 from parallax.config import compose
 from parallax.tools.bench import cli as bench
@@ -59,6 +61,11 @@ def test_bench_main_prints_a_table_and_json(tmp_path, capsys, tiny_overrides):
     printed = capsys.readouterr().out
     assert "[end to end]" in printed and "[roofline cpu]" in printed
     report = json.loads(out.read_text())
+    # which machine, and under what load: rates differ several-fold between CPUs
+    found = report["machine"]
+    assert found["cores"] == os.cpu_count() and found["load_average_before"] >= 0
+    assert found["vector_capability"] == torch.backends.cpu.get_cpu_capability()
+    assert f"{found['cores']} cores, {found['vector_capability']}" in printed.splitlines()[0]
     # each B once, however often it was asked for; the cases take turns in one process
     assert list(report["end_to_end"]["cpu"]) == ["B=1", "B=2"]
     assert report["end_to_end"]["cpu"]["B=1"]["steps_per_second"] > 0
@@ -189,6 +196,13 @@ def test_the_estimate_counts_the_runs_reproduce_trains_and_divides_by_the_rate(t
         == f"paper: 26 runs of 8 experiment files, {total / 1e6:.2f} million robot-iterations"
     )
     assert lines[1].endswith(f"→ {total / 400 / 3600:.1f} hours")
+    assert lines[2] == "  the rates measured on a machine the report does not name"
+    named = {"cpu": "Some CPU", "cores": 2, "vector_capability": "AVX2", "load_average_before": 1.5}
+    report.write_text(json.dumps({"machine": named, "processes": {"this code": {"two": two}}}))
+    estimate.main([str(report), "paper"])
+    assert capsys.readouterr().out.splitlines()[2] == (
+        "  the rates measured on Some CPU (2 cores, AVX2), load average 1.50 before"
+    )
     with pytest.raises(SystemExit) as exit_info:
         estimate.main([str(report), "nosuchfamily"])
     assert exit_info.value.code == 2 and "nosuchfamily" in capsys.readouterr().err

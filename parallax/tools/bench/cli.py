@@ -43,7 +43,12 @@ from parallax.tools.bench.limits import (
     render_cpu_ms_per_frame,
     usable_cores,
 )
-from parallax.tools.bench.timing import cpu_seconds_by_role, seconds_between
+from parallax.tools.bench.timing import (
+    cpu_seconds_by_role,
+    describe_machine,
+    machine,
+    seconds_between,
+)
 from parallax.writable import file_problem
 
 
@@ -175,6 +180,7 @@ def run(
 ) -> dict:
     torch.set_num_threads(threads)
     report: dict = {
+        "machine": machine(),  # before the measurements load it
         "threads": threads,
         "overrides": list(config_overrides),
         "also": list(also),
@@ -252,7 +258,7 @@ def run(
 def format_report(report: dict) -> str:
     lines = [
         f"parallax-bench — torch {report['torch']}, {report['threads']} thread(s), "
-        f"CUDA {'yes' if report['cuda'] else 'no'}"
+        f"CUDA {'yes' if report['cuda'] else 'no'}; {describe_machine(report)}"
     ]
     for group, figures in report.get("components_ms", {}).items():
         lines.append(f"[{group}]")
@@ -438,7 +444,12 @@ def main(argv: list[str] | None = None) -> None:
             print(f"parallax-bench: error: {error}", file=sys.stderr)
             sys.exit(2)
     robots = tuple(dict.fromkeys(args.robots))  # each B once, in the order given
-    report = {"threads": args.threads, "torch": torch.__version__, "cuda": False}
+    report = {
+        "machine": machine(),
+        "threads": args.threads,
+        "torch": torch.__version__,
+        "cuda": False,
+    }
     if not args.only_processes:
         report = run(
             args.repeats,

@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 from parallax.config import compose
+from parallax.tools.bench.timing import describe_machine
 from parallax.tools.experiments import plan
 
 #: The experiment files of a family: conf/experiment/<family>_*.yaml.
@@ -69,6 +70,8 @@ def estimate(report: dict, family: str, seeds: int, headline_seeds: int) -> list
         )
     if len(lines) == 1:
         lines.append("  (the report has no --processes cases: no rate to estimate with)")
+    else:  # a rate holds for the machine it was measured on, and under its load
+        lines.append(f"  the rates {describe_machine(report)}")
     return lines
 
 

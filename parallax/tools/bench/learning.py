@@ -30,7 +30,6 @@ import contextlib
 import json
 import math
 import os
-import platform
 import statistics
 import sys
 import tempfile
@@ -43,6 +42,7 @@ from typing import TYPE_CHECKING
 import torch
 
 from parallax.config import compose
+from parallax.tools.bench.timing import machine_name
 
 if TYPE_CHECKING:
     from parallax.trainer import Trainer
@@ -163,19 +163,6 @@ def run(
     }
     report["medians"] = medians(report["cases"], robots)
     return report
-
-
-def machine_name(device: torch.device) -> str:
-    """The GPU's name for a CUDA device, else the CPU's model name (Linux; else the platform's
-    processor string, which may be empty)."""
-    if device.type == "cuda":
-        return torch.cuda.get_device_name(device)
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.exists():
-        for line in cpuinfo.read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    return platform.processor()
 
 
 def medians(cases: list[dict], robots: Sequence[int]) -> dict:

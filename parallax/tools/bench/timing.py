@@ -8,11 +8,49 @@ whole step is split by thread (:func:`cpu_seconds_by_role`): which part of the s
 from __future__ import annotations
 
 import os
+import platform
 import statistics
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+
+import torch
+
+
+def machine_name(device: torch.device | None = None) -> str:
+    """The GPU's name for a CUDA device, else the CPU's model name (Linux; else the platform's
+    processor string, which may be empty)."""
+    if device is not None and device.type == "cuda":
+        return torch.cuda.get_device_name(device)
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.exists():
+        for line in cpuinfo.read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.processor()
+
+
+def machine() -> dict:
+    """What a speed report was measured on: rates move several-fold between CPUs (and their
+    vector width, which also picks the compiled kernels), and with the load already there."""
+    return {
+        "cpu": machine_name(),
+        "cores": os.cpu_count(),
+        "vector_capability": torch.backends.cpu.get_cpu_capability(),
+        "load_average_before": os.getloadavg()[0],
+    }
+
+
+def describe_machine(report: dict) -> str:
+    """One line naming the machine of a speed report (older reports did not record it)."""
+    found = report.get("machine")
+    if not found:
+        return "measured on a machine the report does not name"
+    return (
+        f"measured on {found['cpu'] or 'an unnamed CPU'} ({found['cores']} cores, "
+        f"{found['vector_capability']}), load average {found['load_average_before']:.2f} before"
+    )
 
 
 def interleaved_medians_ms(
