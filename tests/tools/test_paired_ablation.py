@@ -100,6 +100,25 @@ def test_the_held_out_measure_reads_the_evaluation_with_the_most_photographs(tmp
     assert pa.MEASURES["held_out"](run, "before") == [1.0] * 10
 
 
+def test_a_baseline_scored_on_more_photographs_pairs_on_the_evaluations_both_have(tmp_path):
+    """The baseline's runs also have five photographs per distance, the value's one: the pair
+    is the runs' own evaluations, trial for trial, not no pair at all."""
+    for seed in range(3):
+        _run(tmp_path / f"y1_{seed}", seed, 1.0, 0.2, [5.0, 6.0, 7.0])
+        _run(tmp_path / f"y2_{seed}", seed, 2.0, 0.2, [4.0, 5.0, 6.0 + 0.1 * seed])
+        more = json.loads((tmp_path / f"y1_{seed}" / "eval.json").read_text())
+        more["textures_per_distance"] = 5
+        more["distance"]["errors"] = [9.0] * 15
+        (tmp_path / f"y1_{seed}" / "eval_textures5").mkdir()
+        (tmp_path / f"y1_{seed}" / "eval_textures5" / "eval.json").write_text(json.dumps(more))
+    result = pa.ablation([tmp_path], "distance.y", baseline="1.0")
+    rows = {row["value"]: row["measures"] for row in result["rows"]}
+    assert rows["1.0"]["held_out_before"]["value"]["mean"] == pytest.approx(9.0)
+    difference = rows["2.0"]["held_out_before"]["difference"]
+    assert difference["samples"] == 3 * 3
+    assert difference["mean"] == pytest.approx(-1.0 + 0.1 / 3 * (0 + 1 + 2) / 3)
+
+
 def test_several_settings_make_one_factor_and_name_each_row(tmp_path):
     # the weighting ablation: each y weighted, and no weighting (at the run's y), the baseline
     for seed in range(3):

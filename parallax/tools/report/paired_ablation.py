@@ -10,7 +10,9 @@ numbers) on the seeds both have, measure by measure, before and after §5's pert
   position by position;
 - ``held_out``: the frozen model on held-out photographs (parallax-eval; of several evaluations,
   the one with the most photographs per distance), paired photograph by photograph where the
-  evaluations keep each trial's error, else distance by distance;
+  evaluations keep each trial's error, else distance by distance; where the two runs of a seed
+  differ in how many photographs their fullest evaluation has, the pair is their own
+  evaluations (one photograph per distance), so that both sides score the same trials;
 - ``queue``: the network on its own queue at the end of the phase (the paper's probable scoring
   of Tables 4–5; queues of another size hold other vectors, so this pairs seed totals only);
 - ``trained_eye``: the eye as trained on the grid, the learning policy on the training
@@ -48,8 +50,8 @@ def _eye(run: Run, phase: str) -> list[float] | None:
     return [float(trials[label]["mean"]) for label in run.lateral_labels if label in trials]
 
 
-def _held_out(run: Run, phase: str) -> list[float] | None:
-    found = run.eval_for(phase, most_photographs=True)
+def _held_out(run: Run, phase: str, most_photographs: bool = True) -> list[float] | None:
+    found = run.eval_for(phase, most_photographs=most_photographs)
     distance = (found or {}).get("distance")
     if not distance:
         return None
@@ -69,6 +71,11 @@ MEASURES: dict[str, Callable[[Run, str], list[float] | None]] = {
     "queue": lambda run, phase: _total(run.queue_distance(phase)),
     "trained_eye": lambda run, phase: _total(run.trained_eye_distance(phase)),
     "online": lambda run, phase: _total(run.online_distance(phase)),
+}
+#: A measure's reading on fewer samples, for a seed whose two runs differ in the samples of the
+#: first: both sides read again with it.
+ALIKE: dict[str, Callable[[Run, str], list[float] | None]] = {
+    "held_out": lambda run, phase: _held_out(run, phase, most_photographs=False),
 }
 UNITS = {"eye": "°", "held_out": " %", "queue": " %", "trained_eye": " %", "online": " %"}
 
@@ -119,6 +126,30 @@ def natural_order(value: str) -> list:
     return [(0, float(part), "") if k % 2 else (1, 0.0, part) for k, part in enumerate(parts)]
 
 
+def _pairs(
+    mine: dict[int, list[float]],
+    base: dict[int, list[float]],
+    measure: str,
+    phase: str,
+    mine_runs: dict[int, Run],
+    base_runs: dict[int, Run],
+) -> tuple[list[list[float]], list[list[float]]]:
+    """The samples of the seeds both sides have, side by side, each seed's two on the same
+    samples (read again with :data:`ALIKE` where their counts differ)."""
+    a, b = [], []
+    for seed in sorted(mine):
+        if not base.get(seed):
+            continue
+        ours, theirs = mine[seed], base[seed]
+        if len(ours) != len(theirs) and measure in ALIKE:
+            ours = ALIKE[measure](mine_runs[seed], phase) or []
+            theirs = ALIKE[measure](base_runs[seed], phase) or []
+        if ours and len(ours) == len(theirs):
+            a.append(ours)
+            b.append(theirs)
+    return a, b
+
+
 def ablation(paths: Sequence[str | Path], factor: str, baseline: str | None = None) -> dict:
     """Every value of ``factor`` against the baseline, measure by measure and phase by phase."""
     by_value = runs_by_value(paths, factor)
@@ -136,10 +167,7 @@ def ablation(paths: Sequence[str | Path], factor: str, baseline: str | None = No
                 cell: dict = {"value": Stat.of(sum(v) / len(v) for v in mine.values()).as_dict()}
                 if value != baseline:
                     base = {s: read(r, phase) for s, r in by_value[baseline].items()}
-                    shared = [
-                        s for s in sorted(mine) if base.get(s) and len(base[s]) == len(mine[s])
-                    ]
-                    a, b = [mine[s] for s in shared], [base[s] for s in shared]
+                    a, b = _pairs(mine, base, measure, phase, by_value[value], by_value[baseline])
                     difference = paired_difference(a, b)
                     cell["difference"] = {
                         **difference.as_dict(),
