@@ -65,3 +65,19 @@ def test_seeds_needed_grows_as_the_effect_shrinks_against_the_spread():
     small = seeds_needed([0.1, -0.3, 0.4, 0.2, -0.1])
     assert small is not None and small > 10
     assert seeds_needed([0.5]) is None and seeds_needed([0.0, 0.0]) is None
+
+
+def test_seeds_needed_counts_the_photographs_noise_and_more_than_the_seeds_that_did_not_tell():
+    """Three seeds whose means agree, each over noisy photographs: the seeds' spread alone says
+    two seeds; the interval, which covers the photographs too, does not tell the difference from
+    zero, so more than three are needed, as many as the interval's spread implies."""
+    rng = np.random.default_rng(1)
+    noise = [rng.normal(0.0, 5.0, 71) for _ in range(3)]
+    a = [(n - n.mean() + 0.3).tolist() for n in noise]  # each seed's mean difference is 0.3
+    b = [[0.0] * 71 for _ in range(3)]
+    difference = paired_difference(a, b)
+    assert not difference.tells_apart
+    assert seeds_needed(seed_means(a, b)) == 2  # the seeds' spread alone
+    needed = seeds_needed(seed_means(a, b), difference)
+    sigma = (difference.high - difference.low) / 2 / 1.96 * math.sqrt(3)
+    assert needed == math.ceil((2.80 * sigma / 0.3) ** 2) and needed > 3

@@ -176,7 +176,7 @@ def study(
                     effect[f"{measure}_{phase}"] = {
                         **difference.as_dict(),
                         "verdict": difference.verdict,
-                        "seeds_needed": seeds_needed(seed_means(a, b)),
+                        "seeds_needed": seeds_needed(seed_means(a, b), difference),
                     }
             effects.append(effect)
     return {

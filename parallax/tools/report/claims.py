@@ -46,7 +46,8 @@ each family's a and b (means over the paired seeds), and the paired difference a
 - where the paper states a difference (a < b, or a > b): **{REPRODUCED}** when the interval
   excludes zero on the paper's side, **{REVERSED}** when it excludes zero on the other side, else
   **{NOT_REPRODUCED}**, with the seeds a paired test would need to tell the observed mean
-  difference from zero at the 5 % level with 80 % power (from the seeds' spread);
+  difference from zero at the 5 % level with 80 % power (from the larger of the seeds' spread
+  and the spread the interval implies, and more than the seeds it rests on);
 - where the paper states robustness (a, after §5's perturbation, is similar to b, before it): a
   non-inferiority test with a margin of {{margin:.0%}} of b: **{REPRODUCED}** when the interval's
   upper end is below the margin (after is worse by less than the margin, at 95 %), **{REVERSED}**
@@ -128,7 +129,7 @@ def judge(comparison: Comparison, found: Found) -> dict:
     if cell["verdict"] is None:
         cell["verdict"] = NOT_REPRODUCED
         if not comparison.robustness:
-            cell["seeds_needed"] = seeds_needed(seed_means(found.a, found.b))
+            cell["seeds_needed"] = seeds_needed(seed_means(found.a, found.b), difference)
     return cell
 
 

@@ -126,7 +126,7 @@ def paired_against(sweeps: list[dict], picks: list[dict]) -> dict:
         **difference.as_dict(),
         "verdict": difference.verdict,
         "seed_list": seeds,
-        "seeds_needed": seeds_needed(seed_means(a, b)),
+        "seeds_needed": seeds_needed(seed_means(a, b), difference),
     }
 
 

@@ -118,15 +118,28 @@ def seed_means(a: Sequence[Sequence[float]], b: Sequence[Sequence[float]]) -> li
     return means
 
 
-def seeds_needed(per_seed_differences: Sequence[float], power_z: float = 0.84) -> int | None:
-    """Seeds a paired t-like test would need to tell the observed mean difference from zero at
-    the 5 % level with 80 % power: n = ((1.96 + 0.84)·sd / mean)², from the seeds' spread.
+def seeds_needed(
+    per_seed_differences: Sequence[float],
+    difference: PairedDifference | None = None,
+    power_z: float = 0.84,
+) -> int | None:
+    """Seeds a paired test would need to tell the observed mean difference from zero at the 5 %
+    level with 80 % power: n = ((1.96 + 0.84)·σ / mean)², σ the spread of one seed's mean. σ is
+    the larger of the seeds' own spread and the one the bootstrap's interval implies (its
+    half-width / 1.96 × √n: a seed's mean also varies with its photographs, which a spread of
+    few seeds' means can miss). A comparison not told apart with n seeds needs more than n.
     None when the mean is zero or there are fewer than two seeds to estimate a spread."""
     values = np.asarray(per_seed_differences, dtype=np.float64)
     values = values[np.isfinite(values)]
     if values.size < 2 or values.mean() == 0.0:
         return None
-    sd = float(values.std(ddof=1))
-    if sd == 0.0:
-        return 2
-    return max(2, math.ceil(((1.96 + power_z) * sd / abs(float(values.mean()))) ** 2))
+    spread = float(values.std(ddof=1))
+    fewest = 2
+    if difference is not None and math.isfinite(difference.low) and difference.seeds > 1:
+        half_width = (difference.high - difference.low) / 2
+        spread = max(spread, half_width / 1.96 * math.sqrt(difference.seeds))
+        if not difference.tells_apart:
+            fewest = difference.seeds + 1
+    if spread == 0.0:
+        return fewest
+    return max(fewest, math.ceil(((1.96 + power_z) * spread / abs(float(values.mean()))) ** 2))

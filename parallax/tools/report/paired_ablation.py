@@ -172,7 +172,7 @@ def ablation(paths: Sequence[str | Path], factor: str, baseline: str | None = No
                     cell["difference"] = {
                         **difference.as_dict(),
                         "verdict": difference.verdict,
-                        "seeds_needed": seeds_needed(seed_means(a, b)),
+                        "seeds_needed": seeds_needed(seed_means(a, b), difference),
                     }
                 row["measures"][f"{measure}_{phase}"] = cell
         rows.append(row)
