@@ -17,6 +17,9 @@
 # is not trained: parallax-replay of the other's runs gives exactly its results.
 # Seeds: SEEDS (default 0,1,2); the 5–20 cm experiments of every family but without, the headline
 # rows, HEADLINE_SEEDS (default 0,1,2,3,4).
+# EXPERIMENTS (comma-separated names) keeps a family's steps to those experiment files, e.g.
+#     EXPERIMENTS=paper_multi_5_20_weighted,paper_multi_5_20 bash launch/reproduce.sh paper
+# trains, evaluates and replays only the 5–20 cm rows; the reports still read every record.
 # Arguments with '=' are Hydra overrides for every run (e.g. train.presentations=20 for a
 # smoke test); the others name families.
 # Resumable: each family's runs live in a fixed folder, $RECORD_ROOT/<family> (default
@@ -208,8 +211,13 @@ for family in "${families[@]}"; do
     # <family>_algorithm.yaml holds the settings that the family's <setup> files include
     [[ "$name" == *_algorithm || ! -f "$file" ]] || names+=("$name")
   done
+  if [[ -n "${EXPERIMENTS:-}" ]]; then
+    kept=()
+    for name in "${names[@]}"; do [[ ",$EXPERIMENTS," == *",$name,"* ]] && kept+=("$name"); done
+    names=("${kept[@]}")
+  fi
   if (( ${#names[@]} == 0 )); then
-    echo "launch/reproduce.sh: no experiment files conf/experiment/${family}_*.yaml" >&2
+    echo "launch/reproduce.sh: no experiment files conf/experiment/${family}_*.yaml${EXPERIMENTS:+ among EXPERIMENTS=$EXPERIMENTS}" >&2
     exit 2
   fi
   # reverse order: the 5–20 cm weighted file, the headline, comes before the rows replayed from it

@@ -368,6 +368,34 @@ def test_the_reproduction_does_not_train_a_finished_run_again(tmp_path):
     assert any("400.0 robot-iterations/s in all" in l and l.endswith("hours") for l in lines)
 
 
+def test_experiments_keeps_a_family_to_the_files_it_names(tmp_path):
+    """EXPERIMENTS: the 5–20 cm rows of the paper family alone, trained, evaluated and replayed;
+    no single-position file is trained. A name of no file of the family is refused."""
+    lines = _dry_run(
+        "reproduce.sh",
+        tmp_path,
+        "paper",
+        BENCH_REPORT="",
+        EXPERIMENTS="paper_multi_5_20_weighted,paper_multi_5_20",
+    )
+    trained = [line for line in lines if "parallax-train" in line]
+    assert len(trained) == 1 and "experiment=paper_multi_5_20_weighted " in trained[0], trained
+    assert any(l.startswith("parallax-replay") and "paper_multi_5_20 " in l for l in lines)
+    assert not any("paper_multi_5_10" in l or "paper_single" in l for l in trained)
+    assert not any("paper_multi_5_10" in l for l in lines if l.startswith("parallax-eval"))
+    env = {**os.environ, "PARALLAX_DRY_RUN": "1", "RECORD_ROOT": str(tmp_path)}
+    env.update(SWEEP_ROOT=str(tmp_path), BENCH_REPORT="", EXPERIMENTS="recipe_single_5")
+    result = subprocess.run(
+        ["bash", str(REPO / "launch" / "reproduce.sh"), "paper"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 2 and "among EXPERIMENTS=recipe_single_5" in result.stderr
+
+
 @pytest.mark.slow
 def test_a_bad_job_fails_alone_in_a_joblib_sweep(tmp_path, tiny_overrides):
     """One job with an invalid value must not take the launcher's other jobs down with it."""
