@@ -444,13 +444,14 @@ def main(argv: list[str] | None = None) -> None:
             print(f"parallax-bench: error: {error}", file=sys.stderr)
             sys.exit(2)
     robots = tuple(dict.fromkeys(args.robots))  # each B once, in the order given
-    report = {
-        "machine": machine(),
-        "threads": args.threads,
-        "torch": torch.__version__,
-        "cuda": False,
-    }
-    if not args.only_processes:
+    if args.only_processes:
+        report = {
+            "machine": machine(),
+            "threads": args.threads,
+            "torch": torch.__version__,
+            "cuda": False,
+        }
+    else:
         report = run(
             args.repeats,
             args.presentations,

@@ -43,7 +43,7 @@ def machine() -> dict:
 
 
 def describe_machine(report: dict) -> str:
-    """One line naming the machine of a speed report (older reports did not record it)."""
+    """One line naming the machine of a speed report, or saying that the report names none."""
     found = report.get("machine")
     if not found:
         return "measured on a machine the report does not name"
